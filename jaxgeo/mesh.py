@@ -1,0 +1,317 @@
+"""The `Mesh` pytree: vertices, faces and the connectivity every algorithm needs.
+
+Construction validates its input (in numpy, once, outside any JAX transformation)
+and raises `JaxgeoError` naming the problem. The connectivity arrays are integer
+leaves, so a `Mesh` passes through `jax.jit`, `jax.vmap` and `jax.grad` as it is;
+`Mesh.with_vertices` swaps the vertex array (for instance for a tracer) without
+re-validating.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.csgraph  # noqa: F401
+import trimesh
+from jaxtyping import Array, Float, Int
+from scipy.sparse.csgraph import connected_components
+
+from ._errors import JaxgeoError
+
+#: A face whose area is below this fraction of the square of its longest edge is
+#: degenerate (a needle or a zero-area sliver). For an isosceles needle it means an
+#: aspect ratio worse than about 1e8; no path can be traced through such a face in
+#: float64 with a meaningful crossing parameter.
+DEGENERATE_AREA_RATIO = 1e-10
+
+
+def _fail(problem: str, indices: np.ndarray | None = None, *, limit: int = 10) -> None:
+    if indices is not None:
+        idx = np.asarray(indices).ravel()
+        shown = ", ".join(str(int(i)) for i in idx[:limit])
+        more = f", … ({idx.size} in all)" if idx.size > limit else ""
+        problem = f"{problem}: {shown}{more}"
+    raise JaxgeoError(problem)
+
+
+def _check_arrays(vertices: Any, faces: Any) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(vertices)
+    f = np.asarray(faces)
+    if v.dtype.kind not in "fiu":
+        _fail(f"vertices must be a real array of numbers, got dtype {v.dtype}")
+    if f.dtype.kind not in "iu":
+        _fail(f"faces must be an integer array, got dtype {f.dtype}")
+    if v.ndim != 2 or v.shape[1] != 3:
+        _fail(f"vertices must have shape (V, 3), got {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3:
+        _fail(f"faces must have shape (F, 3) (triangles only), got {f.shape}")
+    if v.shape[0] == 0 or f.shape[0] == 0:
+        _fail(f"empty mesh: {v.shape[0]} vertices and {f.shape[0]} faces")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        _fail("vertex coordinates are NaN or infinite at vertices", np.flatnonzero(bad))
+    out = (f < 0) | (f >= v.shape[0])
+    if out.any():
+        _fail(
+            f"face indices out of range [0, {v.shape[0]}) in faces",
+            np.flatnonzero(out.any(axis=1)),
+        )
+    if v.dtype.kind != "f":
+        v = v.astype(np.float64)
+    return v, f.astype(np.int64)
+
+
+def _check_faces(v: np.ndarray, f: np.ndarray) -> None:
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    if repeated.any():
+        _fail("degenerate faces (a vertex repeated)", np.flatnonzero(repeated))
+    a, b, c = (v[f[:, i]].astype(np.float64) for i in range(3))
+    area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    longest2 = np.max(
+        [np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1), np.sum((a - c) ** 2, 1)],
+        axis=0,
+    )
+    degenerate = area2 <= 2 * DEGENERATE_AREA_RATIO * longest2
+    if degenerate.any():
+        _fail(
+            "degenerate faces (zero area or needle-thin: area below "
+            f"{DEGENERATE_AREA_RATIO:g} x longest edge squared)",
+            np.flatnonzero(degenerate),
+        )
+    key = np.sort(f, axis=1)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        dup = np.flatnonzero(
+            (key[:, None, :] == key[first[counts > 1]][None]).all(-1).any(-1)
+        )
+        _fail("duplicate faces (same three vertices)", dup)
+
+
+def _edges(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique edges, edge→faces (−1 on the boundary) and face→edges.
+
+    `face_edges[f, i]` is the edge opposite corner `i` of face `f`, i.e. the edge
+    `(faces[f, i+1], faces[f, i+2])`: a barycentric coordinate `b[i] = 0` puts a
+    point on edge `face_edges[f, i]`.
+    """
+    n_faces = f.shape[0]
+    half = np.stack([f[:, [1, 2, 0]], f[:, [2, 0, 1]]], axis=-1).reshape(-1, 2)
+    key = np.sort(half, axis=1)
+    edges, inverse, counts = np.unique(
+        key, axis=0, return_inverse=True, return_counts=True
+    )
+    inverse = inverse.ravel()
+    if (counts > 2).any():
+        _fail(
+            "non-manifold edges (shared by more than two faces) between vertices",
+            edges[counts > 2],
+        )
+    face_of_half = np.repeat(np.arange(n_faces), 3)
+    edge_faces = np.full((edges.shape[0], 2), -1, dtype=np.int64)
+    order = np.argsort(inverse, kind="stable")
+    sorted_edges = inverse[order]
+    first = np.searchsorted(sorted_edges, sorted_edges, side="left")
+    slot = np.arange(order.size) - first
+    edge_faces[sorted_edges, slot] = face_of_half[order]
+    # Orientation: the two faces of an interior edge must run through it in
+    # opposite directions.
+    directed = np.unique(half, axis=0, return_counts=True)[1]
+    consistent = not (directed > 1).any()
+    face_edges = inverse.reshape(n_faces, 3)
+    return edges, edge_faces, face_edges, consistent
+
+
+def _check_vertex_fans(
+    f: np.ndarray, edges: np.ndarray, edge_faces: np.ndarray, n_vertices: int
+) -> None:
+    """Every vertex's faces must form one fan (no bow-tie / non-manifold vertex).
+
+    The corners of a vertex are linked across each interior edge through it; a
+    vertex whose corners fall into more than one connected group is non-manifold.
+    """
+    inner = edge_faces[:, 1] >= 0
+    fa, fb = edge_faces[inner, 0], edge_faces[inner, 1]
+    rows, cols = [], []
+    for end in (0, 1):
+        vert = edges[inner, end]
+        rows.append(3 * fa + np.argmax(f[fa] == vert[:, None], axis=1))
+        cols.append(3 * fb + np.argmax(f[fb] == vert[:, None], axis=1))
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    n_corners = 3 * f.shape[0]
+    graph = sp.coo_matrix((np.ones(rows.size), (rows, cols)), (n_corners, n_corners))
+    _, labels = connected_components(graph, directed=False)
+    # one (vertex, label) pair per fan
+    fans = np.unique(np.stack([f.ravel(), labels]), axis=1)[0]
+    bad = np.flatnonzero(np.bincount(fans, minlength=n_vertices) > 1)
+    if bad.size:
+        _fail("non-manifold vertices (faces around them form several fans)", bad)
+
+
+def _orient(f: np.ndarray, edge_faces: np.ndarray) -> np.ndarray:
+    """Reorient faces consistently by a breadth-first walk over face adjacency."""
+    inner = edge_faces[edge_faces[:, 1] >= 0]
+    n = f.shape[0]
+    graph = sp.coo_matrix(
+        (np.ones(len(inner)), (inner[:, 0], inner[:, 1])), shape=(n, n)
+    ).tocsr()
+    flip = np.zeros(n, dtype=bool)
+    seen = np.zeros(n, dtype=bool)
+
+    def same_direction(a: int, b: int) -> bool:
+        ea = {(f[a, i], f[a, (i + 1) % 3]) for i in range(3)}
+        return any((f[b, i], f[b, (i + 1) % 3]) in ea for i in range(3))
+
+    for root in range(n):
+        if seen[root]:
+            continue
+        order, parent = sp.csgraph.breadth_first_order(
+            graph, root, directed=False, return_predecessors=True
+        )
+        seen[order] = True
+        for face in order[1:]:
+            p = parent[face]
+            flip[face] = flip[p] ^ same_direction(face, p)
+        if flip[order].mean() > 0.5:  # keep the majority's orientation
+            flip[order] = ~flip[order]
+    oriented = np.where(flip[:, None], f[:, ::-1], f)
+    if not _edges(oriented)[3]:
+        _fail("the surface is not orientable (e.g. a Möbius strip)")
+    warnings.warn(
+        f"{int(flip.sum())} faces were inconsistently oriented and have been "
+        "reoriented",
+        stacklevel=4,
+    )
+    return oriented
+
+
+def _vertex_faces(f: np.ndarray, n_vertices: int) -> np.ndarray:
+    corner_vertex = f.ravel()
+    order = np.argsort(corner_vertex, kind="stable")
+    valence = np.bincount(corner_vertex, minlength=n_vertices)
+    width = max(int(valence.max()), 1)
+    start = np.concatenate([[0], np.cumsum(valence)[:-1]])
+    slot = np.arange(order.size) - start[corner_vertex[order]]
+    out = np.full((n_vertices, width), -1, dtype=np.int64)
+    out[corner_vertex[order], slot] = order // 3
+    return out
+
+
+class Mesh(eqx.Module):
+    """A validated, consistently oriented, manifold triangle mesh.
+
+    **Arguments:**
+
+    - `vertices`: `(V, 3)` float coordinates (float32 or float64).
+    - `faces`: `(F, 3)` integer vertex indices.
+
+    **Attributes** (all arrays, so the mesh is a pytree):
+
+    - `edges`: `(E, 2)` unique edges, vertex indices sorted.
+    - `edge_faces`: `(E, 2)` the faces on either side; `-1` on the boundary.
+    - `face_edges`: `(F, 3)` the edge opposite each corner of each face.
+    - `vertex_faces`: `(V, K)` faces around each vertex, padded with `-1`.
+    - `face_component`: `(F,)` connected-component label of each face.
+    - `mean_edge_length`: a scalar length scale (tolerances are relative to it).
+
+    **Raises** `JaxgeoError` for wrong shapes or dtypes, an empty mesh, NaN or
+    infinite coordinates, out-of-range indices, degenerate or duplicate faces,
+    non-manifold edges or vertices, and non-orientable surfaces. Inconsistently
+    oriented faces are reoriented with a warning.
+    """
+
+    vertices: Float[Array, "V 3"]
+    faces: Int[Array, "F 3"]
+    edges: Int[Array, "E 2"]
+    edge_faces: Int[Array, "E 2"]
+    face_edges: Int[Array, "F 3"]
+    vertex_faces: Int[Array, "V K"]
+    face_component: Int[Array, " F"]
+    mean_edge_length: Float[Array, ""]
+
+    def __init__(self, vertices: Any, faces: Any):
+        v, f = _check_arrays(vertices, faces)
+        _check_faces(v, f)
+        edges, edge_faces, face_edges, consistent = _edges(f)
+        _check_vertex_fans(f, edges, edge_faces, v.shape[0])
+        if not consistent:
+            f = _orient(f, edge_faces)
+            edges, edge_faces, face_edges, _ = _edges(f)
+        adjacency = sp.coo_matrix(
+            (
+                np.ones(int((edge_faces[:, 1] >= 0).sum())),
+                tuple(edge_faces[edge_faces[:, 1] >= 0].T),
+            ),
+            shape=(f.shape[0], f.shape[0]),
+        )
+        _, component = connected_components(adjacency, directed=False)
+        lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+        self.vertices = jnp.asarray(v)
+        self.faces = jnp.asarray(f, dtype=jnp.int32)
+        self.edges = jnp.asarray(edges, dtype=jnp.int32)
+        self.edge_faces = jnp.asarray(edge_faces, dtype=jnp.int32)
+        self.face_edges = jnp.asarray(face_edges, dtype=jnp.int32)
+        self.vertex_faces = jnp.asarray(_vertex_faces(f, v.shape[0]), jnp.int32)
+        self.face_component = jnp.asarray(component, dtype=jnp.int32)
+        self.mean_edge_length = jnp.asarray(lengths.mean(), dtype=self.vertices.dtype)
+
+    @property
+    def n_vertices(self) -> int:
+        return self.vertices.shape[0]
+
+    @property
+    def n_faces(self) -> int:
+        return self.faces.shape[0]
+
+    @property
+    def n_edges(self) -> int:
+        return self.edges.shape[0]
+
+    @property
+    def boundary_edges(self) -> Int[Array, " B"]:
+        """Indices of the edges with a single face (not jit-able: variable size)."""
+        return jnp.flatnonzero(self.edge_faces[:, 1] < 0)
+
+    def with_vertices(self, vertices: Float[Array, "V 3"]) -> Mesh:
+        """The same connectivity with new vertex positions (no re-validation), for
+        instance a tracer under `jax.grad`."""
+        if jnp.shape(vertices) != self.vertices.shape:
+            _fail(
+                f"with_vertices: expected shape {self.vertices.shape}, "
+                f"got {jnp.shape(vertices)}"
+            )
+        return eqx.tree_at(lambda m: m.vertices, self, vertices)
+
+    @classmethod
+    def from_trimesh(cls, mesh: trimesh.Trimesh) -> Mesh:
+        """Build from a `trimesh.Trimesh` (its vertices and faces as they are)."""
+        return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+
+    def to_trimesh(self) -> trimesh.Trimesh:
+        return trimesh.Trimesh(
+            np.asarray(self.vertices), np.asarray(self.faces), process=False
+        )
+
+
+def load_mesh(path: str | os.PathLike) -> Mesh:
+    """Read a triangle mesh file (OBJ, PLY, STL, OFF, … anything trimesh reads).
+
+    Coincident vertices are merged (STL stores every triangle separately); faces
+    are otherwise kept as they are and validated by `Mesh`.
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        _fail(f"mesh file not found: {path}")
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as e:  # trimesh raises many types on malformed files
+        raise JaxgeoError(f"could not read mesh file {path}: {e}") from e
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        _fail(f"mesh file {path} holds no triangles")
+    loaded.merge_vertices()
+    return Mesh.from_trimesh(loaded)
