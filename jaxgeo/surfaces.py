@@ -65,6 +65,8 @@ def _ring_grid_faces(n_rings: int, n_around: int) -> np.ndarray:
     """Faces of `n_rings` stacked rings of `n_around` vertices (ring `k` holds indices
     `k*n_around ... (k+1)*n_around - 1`), ring `k` turned by `k % 2` half steps."""
     idx = np.arange(n_rings * n_around).reshape(n_rings, n_around)
+    if n_rings < 2:
+        return np.zeros((0, 3), dtype=np.int64)
     bands = [_band_faces(idx[k], idx[k + 1], 0.5 * (k % 2)) for k in range(n_rings - 1)]
     return np.concatenate(bands).astype(np.int64)
 
@@ -163,7 +165,7 @@ def catenoid_parameter_roots(
 
     g(c) = c·cosh(d/(2c)) is convex in c > 0 with its minimum where x·tanh x = 1,
     x = d/(2c) (x* ≈ 1.19968); two catenoids span the rings when g(c*) < R, i.e.
-    d/R < 2x*/cosh x* ≈ 1.3255. For R = d = 1: c ≈ 0.2350 and c ≈ 0.8483.
+    d/R < 2x*/cosh x* ≈ 1.3255. For R = d = 1: c ≈ 0.235095 and c ≈ 0.848338.
     Raises `JaxgeoError` when the rings are too far apart for any catenoid.
     """
     d, big_r = float(ring_distance), float(ring_radius)
@@ -194,7 +196,7 @@ def catenoid_parameter(ring_radius: float = 1.0, ring_distance: float = 1.0) -> 
     """The waist radius c of the catenoid r(z) = c·cosh(z/c) spanning two coaxial
     rings of radius R at z = ±d/2: the LARGER root of c·cosh(d/(2c)) = R.
 
-    The equation has two roots (R = d = 1: c ≈ 0.2350 and c ≈ 0.8483); the larger
+    The equation has two roots (R = d = 1: c ≈ 0.235095 and c ≈ 0.848338); the larger
     one is the stable, area-minimising catenoid, the smaller one an unstable
     minimal surface with a thin neck. See `catenoid_parameter_roots`.
     """
