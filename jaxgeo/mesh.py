@@ -10,6 +10,7 @@ re-validating.
 from __future__ import annotations
 
 import os
+import sys
 import warnings
 from typing import Any
 
@@ -24,77 +25,127 @@ from scipy.sparse.csgraph import connected_components
 
 from ._errors import JaxgeoError
 
-#: A face whose area is below this fraction of the square of its longest edge is
-#: degenerate (a needle or a zero-area sliver). For an isosceles needle it means an
-#: aspect ratio worse than about 1e8; no path can be traced through such a face in
-#: float64 with a meaningful crossing parameter.
-DEGENERATE_AREA_RATIO = 1e-10
+#: A face whose area is below this fraction of the square of its longest edge is a
+#: needle. For a triangle, area / longest² = h / (2 L), with h its height over the
+#: longest edge L, so this rejects faces with h / L < 2e-8 (aspect ratio worse than
+#: about 5e7). The unit normal of such a face, computed from a cross product in
+#: float64, has a relative error of about eps / (2 · ratio) ≈ 1e-8 = sqrt(eps): below
+#: that, Phong normals and crossing parameters lose more than half their digits.
+DEGENERATE_AREA_RATIO = 1e-8
+
+#: Below this ratio (a few float64 ulps) the area is zero to rounding: the three
+#: vertices are collinear.
+_ZERO_AREA_RATIO = 64 * float(np.finfo(np.float64).eps)
 
 
-def _fail(problem: str, indices: np.ndarray | None = None, *, limit: int = 10) -> None:
+def _fail(problem: str, indices: Any = None, *, limit: int = 10) -> None:
+    """Raise `JaxgeoError(problem)`, listing up to `limit` indices (or index pairs
+    when `indices` is 2-D)."""
     if indices is not None:
-        idx = np.asarray(indices).ravel()
-        shown = ", ".join(str(int(i)) for i in idx[:limit])
-        more = f", … ({idx.size} in all)" if idx.size > limit else ""
+        idx = np.asarray(indices)
+        rows = idx.reshape(len(idx), -1) if idx.ndim > 1 else idx.reshape(-1, 1)
+
+        def show(row: np.ndarray) -> str:
+            items = ", ".join(str(int(i)) for i in row)
+            return items if row.size == 1 else f"({items})"
+
+        shown = ", ".join(show(r) for r in rows[:limit])
+        more = f", … ({len(rows)} in all)" if len(rows) > limit else ""
         problem = f"{problem}: {shown}{more}"
     raise JaxgeoError(problem)
 
 
+def _as_array(x: Any, name: str) -> np.ndarray:
+    try:
+        return np.asarray(x)
+    except Exception as e:  # ragged lists, tracers, objects numpy cannot convert
+        raise JaxgeoError(
+            f"{name} could not be converted to an array ({type(e).__name__}: {e}); "
+            "a Mesh must be built from concrete (V, 3) and (F, 3) arrays, outside "
+            "jax.jit (use Mesh.with_vertices to swap in traced vertices)"
+        ) from e
+
+
 def _check_arrays(vertices: Any, faces: Any) -> tuple[np.ndarray, np.ndarray]:
-    v = np.asarray(vertices)
-    f = np.asarray(faces)
+    v = _as_array(vertices, "vertices")
+    f = _as_array(faces, "faces")
+    if v.size == 0 or f.size == 0:
+        _fail(
+            f"empty mesh: vertices of shape {v.shape} and faces of shape {f.shape}; "
+            "a mesh needs at least one triangle"
+        )
     if v.dtype.kind not in "fiu":
         _fail(f"vertices must be a real array of numbers, got dtype {v.dtype}")
     if f.dtype.kind not in "iu":
-        _fail(f"faces must be an integer array, got dtype {f.dtype}")
+        _fail(f"faces must be an integer array of vertex indices, got dtype {f.dtype}")
     if v.ndim != 2 or v.shape[1] != 3:
         _fail(f"vertices must have shape (V, 3), got {v.shape}")
     if f.ndim != 2 or f.shape[1] != 3:
         _fail(f"faces must have shape (F, 3) (triangles only), got {f.shape}")
-    if v.shape[0] == 0 or f.shape[0] == 0:
-        _fail(f"empty mesh: {v.shape[0]} vertices and {f.shape[0]} faces")
-    bad = ~np.isfinite(v).all(axis=1)
-    if bad.any():
-        _fail("vertex coordinates are NaN or infinite at vertices", np.flatnonzero(bad))
+    if v.dtype == np.float16:
+        v = v.astype(np.float32)
+    elif v.dtype not in (np.float32, np.float64):  # integers, long double
+        v = v.astype(np.float64)
+    nan = np.isnan(v).any(axis=1)
+    if nan.any():
+        _fail("vertex coordinates are NaN at vertices", np.flatnonzero(nan))
+    inf = np.isinf(v).any(axis=1)
+    if inf.any():
+        _fail("vertex coordinates are infinite at vertices", np.flatnonzero(inf))
+    # Squared lengths and cross products must not overflow in the vertex dtype.
+    limit = np.sqrt(np.finfo(v.dtype).max) / 64
+    huge = np.abs(v).max(axis=1) > limit
+    if huge.any():
+        _fail(
+            f"vertex coordinates too large for {v.dtype} (|x| > {limit:.3g}: squared "
+            "lengths would overflow) at vertices",
+            np.flatnonzero(huge),
+        )
     out = (f < 0) | (f >= v.shape[0])
     if out.any():
         _fail(
             f"face indices out of range [0, {v.shape[0]}) in faces",
             np.flatnonzero(out.any(axis=1)),
         )
-    if v.dtype.kind != "f":
-        v = v.astype(np.float64)
     return v, f.astype(np.int64)
 
 
 def _check_faces(v: np.ndarray, f: np.ndarray) -> None:
     repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
     if repeated.any():
-        _fail("degenerate faces (a vertex repeated)", np.flatnonzero(repeated))
+        _fail(
+            "degenerate faces (a vertex repeated within the face)",
+            np.flatnonzero(repeated),
+        )
     a, b, c = (v[f[:, i]].astype(np.float64) for i in range(3))
-    area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)  # twice the area
     longest2 = np.max(
         [np.sum((b - a) ** 2, 1), np.sum((c - b) ** 2, 1), np.sum((a - c) ** 2, 1)],
         axis=0,
     )
-    degenerate = area2 <= 2 * DEGENERATE_AREA_RATIO * longest2
-    if degenerate.any():
+    zero = area2 <= 2 * _ZERO_AREA_RATIO * longest2
+    if zero.any():
         _fail(
-            "degenerate faces (zero area or needle-thin: area below "
+            "degenerate faces with zero area (collinear or coincident vertices)",
+            np.flatnonzero(zero),
+        )
+    needle = area2 <= 2 * DEGENERATE_AREA_RATIO * longest2
+    if needle.any():
+        _fail(
+            "near-degenerate needle faces (area below "
             f"{DEGENERATE_AREA_RATIO:g} x longest edge squared)",
-            np.flatnonzero(degenerate),
+            np.flatnonzero(needle),
         )
     key = np.sort(f, axis=1)
-    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        dup = np.flatnonzero(
-            (key[:, None, :] == key[first[counts > 1]][None]).all(-1).any(-1)
-        )
-        _fail("duplicate faces (same three vertices)", dup)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    dup = counts[inverse.ravel()] > 1
+    if dup.any():
+        _fail("duplicate faces (the same three vertices)", np.flatnonzero(dup))
 
 
-def _edges(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique edges, edge→faces (−1 on the boundary) and face→edges.
+def _edges(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Unique edges, edge→faces (−1 on the boundary), face→edges, and whether the
+    faces are consistently oriented.
 
     `face_edges[f, i]` is the edge opposite corner `i` of face `f`, i.e. the edge
     `(faces[f, i+1], faces[f, i+2])`: a barycentric coordinate `b[i] = 0` puts a
@@ -153,6 +204,19 @@ def _check_vertex_fans(
         _fail("non-manifold vertices (faces around them form several fans)", bad)
 
 
+def _caller_stacklevel() -> int:
+    """The `stacklevel` that points a warning at the first frame outside jaxgeo and
+    equinox (whose module machinery wraps `Mesh.__init__`)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    internal = (here, os.path.dirname(os.path.abspath(eqx.__file__)))
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(
+        internal
+    ):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 def _orient(f: np.ndarray, edge_faces: np.ndarray) -> np.ndarray:
     """Reorient faces consistently by a breadth-first walk over face adjacency."""
     inner = edge_faces[edge_faces[:, 1] >= 0]
@@ -180,12 +244,18 @@ def _orient(f: np.ndarray, edge_faces: np.ndarray) -> np.ndarray:
         if flip[order].mean() > 0.5:  # keep the majority's orientation
             flip[order] = ~flip[order]
     oriented = np.where(flip[:, None], f[:, ::-1], f)
-    if not _edges(oriented)[3]:
-        _fail("the surface is not orientable (e.g. a Möbius strip)")
+    half = oriented[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    directed, counts = np.unique(half, axis=0, return_counts=True)
+    if (counts > 1).any():
+        _fail(
+            "the surface is not orientable (like a Möbius strip): no choice of face "
+            "orientations is consistent; it still flips across the edges",
+            directed[counts > 1],
+        )
     warnings.warn(
         f"{int(flip.sum())} faces were inconsistently oriented and have been "
         "reoriented",
-        stacklevel=4,
+        stacklevel=_caller_stacklevel(),
     )
     return oriented
 
@@ -298,20 +368,65 @@ class Mesh(eqx.Module):
         )
 
 
-def load_mesh(path: str | os.PathLike) -> Mesh:
+def load_mesh(path: str | os.PathLike, *, merge_vertices: bool = True) -> Mesh:
     """Read a triangle mesh file (OBJ, PLY, STL, OFF, … anything trimesh reads).
 
-    Coincident vertices are merged (STL stores every triangle separately); faces
-    are otherwise kept as they are and validated by `Mesh`.
+    **Arguments:**
+
+    - `path`: the file; its extension selects the format.
+    - `merge_vertices`: merge vertices with bit-identical coordinates (STL stores
+      every triangle separately; OBJ files split vertices at texture seams). The
+      first occurrence keeps its place, so files without duplicates keep their
+      vertex numbering.
+
+    Polygons (quads, …) are triangulated by trimesh. The result is validated by
+    `Mesh`.
+
+    **Raises** `JaxgeoError` naming the file and the problem when the file is
+    missing, cannot be parsed, holds no triangles, or fails `Mesh` validation.
     """
     path = os.fspath(path)
     if not os.path.exists(path):
         _fail(f"mesh file not found: {path}")
+    if not os.path.isfile(path):
+        _fail(f"mesh path is not a file: {path}")
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # numpy warnings on garbage numbers
+            loaded = trimesh.load(path, force="mesh", process=False)
+        if not isinstance(loaded, trimesh.Trimesh):
+            _fail(f"mesh file {path} holds no triangle mesh")
+        vertices = np.asarray(loaded.vertices)
+        faces = np.asarray(loaded.faces)
+    except JaxgeoError:
+        raise
     except Exception as e:  # trimesh raises many types on malformed files
-        raise JaxgeoError(f"could not read mesh file {path}: {e}") from e
-    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise JaxgeoError(
+            f"could not read mesh file {path}: {type(e).__name__}: {e}"
+        ) from e
+    if faces.size == 0:
         _fail(f"mesh file {path} holds no triangles")
-    loaded.merge_vertices()
-    return Mesh.from_trimesh(loaded)
+    if merge_vertices and vertices.ndim == 2 and faces.dtype.kind in "iu":
+        vertices, faces = _merge_identical(vertices, faces)
+    try:
+        return Mesh(vertices, faces)
+    except JaxgeoError as e:
+        raise JaxgeoError(f"invalid mesh in {path}: {e}") from e
+
+
+def _merge_identical(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge vertices with equal coordinates; the first occurrence keeps its place.
+
+    Faces indexing a vertex that does not exist are left for `Mesh` to report."""
+    key = v + 0.0  # −0.0 → +0.0, so both merge
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    if first.size == v.shape[0]:
+        return v, f
+    # renumber the unique vertices in order of first occurrence
+    rank = np.empty(first.size, dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    remap = rank[inverse]
+    inside = (f >= 0) & (f < v.shape[0])
+    f = np.where(inside, remap[np.clip(f, 0, v.shape[0] - 1)], -1 - np.abs(f))
+    return v[np.sort(first)], f
