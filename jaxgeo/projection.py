@@ -183,33 +183,42 @@ def solve_edges(
 
 
 def solve_crossing(
-    a: Float[Array, 3],
-    b: Float[Array, 3],
-    x1: Float[Array, 3],
-    x2: Float[Array, 3],
-    n1: Float[Array, 3],
-    n2: Float[Array, 3],
-    y0: Float[Array, 3],
+    a: Float[Array, "3"],
+    b: Float[Array, "3"],
+    x1: Float[Array, "3"],
+    x2: Float[Array, "3"],
+    n1: Float[Array, "3"],
+    n2: Float[Array, "3"],
+    y0: Float[Array, "3"],
+    active: Bool[Array, ""] | bool = True,
     *,
     max_steps: int = 16,
-) -> tuple[Float[Array, 3], Bool[Array, ""]]:
+) -> tuple[Float[Array, "3"], Bool[Array, ""]]:
     """Solve System (16) on one edge from the starting point `y0 = (u, t, ζ)`.
 
     Differentiable in every argument by the implicit function theorem
-    (`optimistix.ImplicitAdjoint`): this is what the replay of a traced path uses.
+    (`optimistix.ImplicitAdjoint`, forward and reverse mode): this is what the
+    replay of a traced path uses. Where `active` is False the lane solves the
+    trivial system `y = y0` instead (masking without NaN gradients).
     Returns `(y, converged)`.
     """
-    args = (a, b - a, x1, x2 - x1, n1, n2 - n1)
+    inner = (a, b - a, x1, x2 - x1, n1, n2 - n1)
     sol = optx.root_find(
-        residual,
+        _masked_residual,
         _newton(a.dtype),
         y0,
-        args=args,
+        args=(inner, jnp.asarray(active), y0),
         max_steps=max_steps,
         throw=False,
         adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
     )
     return sol.value, sol.result == optx.RESULTS.successful
+
+
+def initial_guess(a, b, x1, x2, n1, n2, u):
+    """`(u, t, ζ)` from an edge parameter u (t and ζ by least squares)."""
+    t, zeta = _t_zeta(u, a, b - a, x1, x2 - x1, n1, n2 - n1)
+    return jnp.stack([u, t, zeta])
 
 
 def solve_fixed_point(

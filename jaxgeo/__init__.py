@@ -1,0 +1,11 @@
+"""jaxgeo: differentiable geodesics on triangle meshes, in JAX."""
+
+from ._errors import JaxgeoError as JaxgeoError
+from .geodesic import path_length as path_length, shortest_path as shortest_path
+from .locate import SurfacePoint as SurfacePoint, locate as locate
+from .mesh import Mesh as Mesh, load_mesh as load_mesh
+from .normals import vertex_normals as vertex_normals
+from .path import Path as Path, Status as Status
+from .trace import TraceOptions as TraceOptions
+
+__version__ = "0.1.0"

@@ -1,0 +1,149 @@
+"""The public entry points: `shortest_path` and `path_length`."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ._errors import JaxgeoError
+from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint, locate
+from .mesh import Mesh
+from .normals import Weighting, vertex_normals
+from .path import Path, Status
+from .replay import replay
+from .trace import TraceOptions, trace
+
+Method = Literal["laser"]
+Endpoint = ArrayLike | SurfacePoint
+
+
+def _is_concrete(*xs) -> bool:
+    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(xs))
+
+
+def _check_point(name: str, p, mesh: Mesh) -> None:
+    """Eager checks of an endpoint given as a 3-D point or a SurfacePoint."""
+    if isinstance(p, SurfacePoint):
+        face, bary = np.asarray(p.face), np.asarray(p.bary)
+        if face.shape != () or face.dtype.kind not in "iu":
+            raise JaxgeoError(f"{name}.face must be an integer scalar, got {face!r}")
+        if not 0 <= int(face) < mesh.n_faces:
+            raise JaxgeoError(
+                f"{name}.face {int(face)} is out of range [0, {mesh.n_faces})"
+            )
+        if bary.shape != (3,) or not np.isfinite(bary).all():
+            raise JaxgeoError(f"{name}.bary must be 3 finite numbers, got {bary!r}")
+        if (bary < -1e-9).any() or abs(bary.sum() - 1) > 1e-6:
+            raise JaxgeoError(
+                f"{name}.bary must be non-negative and sum to 1, got {bary!r}"
+            )
+        return
+    a = np.asarray(p)
+    if a.dtype.kind not in "fiu":
+        raise JaxgeoError(f"{name} must be a real 3-D point, got dtype {a.dtype}")
+    if a.shape != (3,):
+        raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
+    if not np.isfinite(a).all():
+        raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")
+
+
+def _as_surface_point(mesh: Mesh, p: Endpoint):
+    if isinstance(p, SurfacePoint):
+        sp = SurfacePoint(jnp.asarray(p.face), jnp.asarray(p.bary, mesh.vertices.dtype))
+        return sp, jnp.zeros((), mesh.vertices.dtype)
+    return locate(mesh, jnp.asarray(p, mesh.vertices.dtype))
+
+
+@eqx.filter_jit
+def _solve(
+    mesh: Mesh,
+    p1: Endpoint,
+    p2: Endpoint,
+    max_distance: float,
+    weighting: str,
+    options: TraceOptions,
+) -> tuple[Path, SurfacePoint, SurfacePoint, Float[Array, "2"]]:
+    start, d1 = _as_surface_point(mesh, p1)
+    end, d2 = _as_surface_point(mesh, p2)
+    far = jnp.maximum(d1, d2) > max_distance * mesh.mean_edge_length
+    apart = mesh.face_component[start.face] != mesh.face_component[end.face]
+    initial = jnp.where(
+        far, Status.FAR_FROM_SURFACE, jnp.where(apart, Status.DIFFERENT_COMPONENTS, -1)
+    )
+    normals = vertex_normals(mesh.vertices, mesh.faces, weighting)
+    traced = trace(
+        jax.lax.stop_gradient(mesh),
+        jax.lax.stop_gradient(normals),
+        jax.lax.stop_gradient(start),
+        jax.lax.stop_gradient(end),
+        options,
+        initial,
+    )
+    path = replay(mesh, normals, start, end, traced)
+    return path, start, end, jnp.stack([d1, d2])
+
+
+def shortest_path(
+    mesh: Mesh,
+    p1: Endpoint,
+    p2: Endpoint,
+    *,
+    method: Method = "laser",
+    candidates: Literal["local", "all"] = "local",
+    max_points: int = 1024,
+    normals: Weighting = "uniform",
+    max_distance: float = DEFAULT_MAX_DISTANCE,
+    throw: bool = True,
+) -> Path:
+    """The geodesic from `p1` to `p2` on `mesh`.
+
+    **Arguments:**
+
+    - `mesh`: a `Mesh`.
+    - `p1`, `p2`: endpoints, each a 3-D point near the surface (it is moved to the
+      nearest point of the mesh) or a `SurfacePoint` (face, barycentric).
+    - `method`: `"laser"`, the sliding laser ray of the paper (sections 4–5).
+    - `candidates`: `"local"` or `"all"` edges per step (see `jaxgeo.trace`).
+    - `max_points`: capacity of the path (endpoints included).
+    - `normals`: vertex-normal weighting, `"uniform"` = the paper's eq. (8)–(9).
+    - `max_distance`: largest distance of a 3-D endpoint from the surface, in mean
+      edge lengths.
+    - `throw`: raise `JaxgeoError` when the path is not complete. Only acts on
+      concrete inputs; under `jax.jit`/`jax.vmap` check `Path.status` instead.
+
+    **Returns:** a `Path`; its points and length are differentiable with respect to
+    `mesh.vertices` and the endpoints (see `jaxgeo.replay`).
+    """
+    if not isinstance(mesh, Mesh):
+        raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
+    if method != "laser":
+        raise JaxgeoError(f"unknown method {method!r}; expected 'laser'")
+    concrete = _is_concrete(mesh, p1, p2)
+    if concrete:
+        _check_point("p1", p1, mesh)
+        _check_point("p2", p2, mesh)
+    options = TraceOptions(candidates=candidates, max_points=max_points)
+    path, _, _, dist = _solve(mesh, p1, p2, max_distance, normals, options)
+    if throw and concrete:
+        status = Status(int(path.status))
+        if status != Status.SUCCESS:
+            detail = ""
+            if status == Status.FAR_FROM_SURFACE:
+                limit = max_distance * float(mesh.mean_edge_length)
+                detail = (
+                    f": distances {float(dist[0]):.3g} (p1) and {float(dist[1]):.3g} "
+                    f"(p2), limit {limit:.3g} ({max_distance} mean edge lengths)"
+                )
+            raise JaxgeoError(f"no path from p1 to p2: {status.message}{detail}")
+    return path
+
+
+def path_length(mesh: Mesh, p1: Endpoint, p2: Endpoint, **kwargs) -> Float[Array, ""]:
+    """The length of `shortest_path(mesh, p1, p2, **kwargs)`; differentiable with
+    respect to `mesh.vertices`, `p1` and `p2` (`jax.grad`, `jax.jvp`)."""
+    return shortest_path(mesh, p1, p2, **kwargs).length

@@ -1,0 +1,108 @@
+"""The `Path` pytree and its status codes."""
+
+from __future__ import annotations
+
+import enum
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from ._numerics import safe_norm
+
+
+class Status(enum.IntEnum):
+    """How a trace ended. `Path.status` holds one of these as an integer array."""
+
+    #: Point 2 was reached; the polyline is complete.
+    SUCCESS = 0
+    #: The buffer of `max_points` filled before point 2 was reached.
+    MAX_STEPS = 1
+    #: No valid crossing of System (16) ahead of the current point (e.g. the chord's
+    #: projection leaves the mesh through its boundary).
+    NO_CROSSING = 2
+    #: An endpoint is farther from the surface than the allowed distance.
+    FAR_FROM_SURFACE = 3
+    #: The endpoints lie on different connected components of the mesh.
+    DIFFERENT_COMPONENTS = 4
+    #: The exact refinement could not complete (see `jaxgeo.refine`).
+    REFINE_FAILED = 5
+
+    @property
+    def message(self) -> str:
+        return _MESSAGES[self]
+
+
+_MESSAGES = {
+    Status.SUCCESS: "point 2 reached",
+    Status.MAX_STEPS: "out of steps: the path needs more than max_points points "
+    "(raise max_points)",
+    Status.NO_CROSSING: "no crossing found ahead of the current point (the "
+    "projection of the chord leaves the mesh, e.g. across its boundary)",
+    Status.FAR_FROM_SURFACE: "an endpoint is too far from the surface",
+    Status.DIFFERENT_COMPONENTS: "the endpoints lie on different connected "
+    "components of the mesh",
+    Status.REFINE_FAILED: "the exact refinement did not converge",
+}
+
+#: Kinds of path point, as in `Path.kinds`.
+FACE, EDGE, VERTEX = 0, 1, 2
+
+
+class Path(eqx.Module):
+    """A polyline on the mesh from point 1 to point 2.
+
+    Buffers have a fixed capacity `M` (static, so that `jax.jit` and `jax.vmap`
+    see fixed shapes); the first `count` entries are the path.
+
+    - `points`: `(M, 3)` 3-D points; entries past `count` repeat the last point,
+      so `points` can be plotted or summed over without masking.
+    - `kinds`: `(M,)` 0 = an endpoint (given by its face and barycentric
+      coordinates, wherever it lies in the face's closure), 1 = a crossing of an
+      edge, 2 = a mesh vertex.
+    - `elements`: `(M,)` the face, edge or vertex index of each point.
+    - `params`: `(M,)` for edge crossings, the parameter `u` on the edge
+      (point = (1 − u)·V[edges[e, 0]] + u·V[edges[e, 1]]); 0 otherwise.
+    - `branch`: `(M,)` True where the step to this point had several valid
+      crossings ahead: a branch point in the sense of the paper's section 6.
+    - `count`, `length`, `status` (a `Status` code).
+    """
+
+    points: Float[Array, "M 3"]
+    kinds: Int[Array, " M"]
+    elements: Int[Array, " M"]
+    params: Float[Array, " M"]
+    branch: Bool[Array, " M"]
+    count: Int[Array, ""]
+    length: Float[Array, ""]
+    status: Int[Array, ""]
+
+    @property
+    def ok(self) -> Bool[Array, ""]:
+        return self.status == Status.SUCCESS
+
+    @property
+    def n_branch_points(self) -> Int[Array, ""]:
+        return jnp.sum(self.branch)
+
+    def polyline(self):
+        """The path's points as a numpy array `(count, 3)` (not jit-able)."""
+        import numpy as np
+
+        return np.asarray(self.points)[: int(self.count)]
+
+
+def polyline_length(
+    points: Float[Array, "M 3"], count: Int[Array, ""]
+) -> Float[Array, ""]:
+    """Length of the first `count` points of a padded polyline (safe at repeated
+    points: no NaN gradient)."""
+    seg = safe_norm(points[1:] - points[:-1])
+    live = jnp.arange(1, points.shape[0]) < count
+    return jnp.sum(jnp.where(live, seg, 0.0))
+
+
+def pad_tail(points: Float[Array, "M 3"], count: Int[Array, ""]) -> Float[Array, "M 3"]:
+    """Repeat the last live point into the unused part of the buffer."""
+    idx = jnp.minimum(jnp.arange(points.shape[0]), jnp.maximum(count - 1, 0))
+    return points[idx]

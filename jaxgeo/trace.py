@@ -1,0 +1,234 @@
+"""The sliding laser ray (sections 4–5 of the paper).
+
+From the current point P of the path, the chord P → point 2 is projected onto the
+mesh along the Phong normals: System (16) is solved on a set of candidate edges and
+the nearest valid crossing ahead of P (chord parameter t > 0) becomes the next point
+of the path; the chord's start slides there and the step repeats until the face of
+point 2 is reached.
+
+The loop is a `lax.while_loop` with fixed-capacity buffers, so it compiles once for
+a mesh size and `max_points` and runs under `jax.vmap`. It makes discrete choices
+(which edge is next), so it is not differentiated; `jaxgeo.replay` recomputes the
+crossings differentiably on the edge sequence it found.
+
+Candidates:
+
+- `"local"`: the edges of the faces around P (the face it is in; the two faces of
+  its edge; the ring of faces of its vertex), minus the edges through P. The cost of
+  a step does not depend on the mesh size, and crossings on the far side of a
+  closed surface (the normal lines of a chord pierce both sides) are never seen.
+- `"all"`: every edge of the mesh, as in the paper (Steps 2–5). The nearest valid
+  crossing ahead is the next point; on a closed surface the far-side crossings are
+  about a diameter away and lose to the near-side ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from .locate import SurfacePoint, snap
+from .mesh import Mesh
+from .path import EDGE, FACE, VERTEX, Path, Status, pad_tail, polyline_length
+from .projection import param_tolerance, solve_edges
+
+
+@dataclasses.dataclass(frozen=True)
+class TraceOptions:
+    """Static options of the sliding laser ray (changing one recompiles once).
+
+    - `candidates`: `"local"` (default) or `"all"` (see the module docstring).
+    - `max_points`: capacity of the path buffers, endpoints included.
+    - `newton_steps`: Newton iterations allowed per root of System (16); the
+      closed-form start needs one or two.
+    """
+
+    candidates: Literal["local", "all"] = "local"
+    max_points: int = 1024
+    newton_steps: int = 8
+
+    def __post_init__(self):
+        if self.candidates not in ("local", "all"):
+            raise ValueError(
+                f"candidates must be 'local' or 'all', not {self.candidates!r}"
+            )
+        if self.max_points < 2:
+            raise ValueError("max_points must be at least 2")
+
+
+def star_faces(
+    mesh: Mesh, kind: Int[Array, ""], index: Int[Array, ""]
+) -> Int[Array, " S"]:
+    """The faces around a mesh element (a face itself; the faces of an edge; the
+    ring of a vertex), padded with −1 to a fixed width."""
+    width = max(mesh.vertex_faces.shape[1], 2)
+
+    def pad(a):
+        return jnp.concatenate([a, jnp.full(width - a.shape[0], -1, a.dtype)])
+
+    face = pad(jnp.reshape(index, (1,)).astype(mesh.faces.dtype))
+    edge = pad(mesh.edge_faces[index])
+    vertex = pad(mesh.vertex_faces[index])
+    return jnp.where(kind == FACE, face, jnp.where(kind == EDGE, edge, vertex))
+
+
+def trace(
+    mesh: Mesh,
+    normals: Float[Array, "V 3"],
+    start: SurfacePoint,
+    end: SurfacePoint,
+    options: TraceOptions = TraceOptions(),
+    initial_status: Int[Array, ""] | int = -1,
+) -> Path:
+    """Trace the sliding laser ray from `start` to `end`.
+
+    **Arguments:**
+
+    - `mesh`, `normals`: the mesh and its Phong vertex normals (eq. 8–9).
+    - `start`, `end`: the endpoints on the surface.
+    - `options`: a `TraceOptions`.
+    - `initial_status`: −1 to trace; a `Status` code to return that status at once
+      (used for endpoint checks made under `jit`).
+
+    **Returns:** a `Path`.
+    """
+    dtype = mesh.vertices.dtype
+    m = options.max_points
+    tol = param_tolerance(dtype)
+    verts, edges = mesh.vertices, mesh.edges
+    p1, p2 = start.position(mesh), end.position(mesh)
+    kind1, idx1 = snap(mesh, start, tol)
+    idx1 = idx1.astype(jnp.int32)
+    kind2, idx2 = snap(mesh, end, tol)
+    target = star_faces(mesh, kind2, idx2)
+    # A branch: a second valid crossing ahead, farther than this from the chosen
+    # one (well above the solver's noise, well below any edge length).
+    branch_gap = 1e-6 * mesh.mean_edge_length
+
+    if options.candidates == "all":
+        all_edges = jnp.arange(mesh.n_edges, dtype=edges.dtype)
+
+    def in_star(cand, star):
+        if options.candidates == "local":
+            return jnp.ones(cand.shape, bool)
+        star_edges = jnp.where(star[:, None] >= 0, mesh.face_edges[star], -1)
+        return jnp.any(cand[:, None] == star_edges.reshape(1, -1), axis=1)
+
+    def candidates(kind, idx):
+        if options.candidates == "local":
+            star = star_faces(mesh, kind, idx)
+            cand = mesh.face_edges[jnp.maximum(star, 0)].reshape(-1)
+            live = jnp.repeat(star >= 0, 3)
+        else:
+            cand, live = all_edges, jnp.ones(all_edges.shape, bool)
+        through_p = jnp.where(
+            kind == EDGE,
+            cand == idx,
+            (kind == VERTEX) & jnp.any(edges[cand] == idx, axis=1),
+        )
+        return cand, live & ~through_p
+
+    def step(state):
+        (pos, kind, idx, count, status, pts, kinds, elems, params, branch) = state
+        star = star_faces(mesh, kind, idx)
+        reached = jnp.any((star[:, None] == target[None, :]) & (star[:, None] >= 0))
+        cand, live = candidates(kind, idx)
+        e0, e1 = edges[cand, 0], edges[cand, 1]
+        cr = solve_edges(
+            pos,
+            p2,
+            verts[e0],
+            verts[e1],
+            normals[e0],
+            normals[e1],
+            max_steps=options.newton_steps,
+        )
+        ok = cr.valid & (cr.t > tol) & live[:, None]
+        dist = jnp.linalg.norm(cr.point - pos, axis=-1)
+        dist = jnp.where(ok, dist, jnp.inf)
+        best = jnp.argmin(dist)
+        c, r = best // 2, best % 2
+        found = jnp.any(ok)
+        u = cr.u[c, r]
+        point = cr.point[c, r]
+        # Branch point (section 6): the face(s) ahead hold a second crossing.
+        elsewhere = jnp.linalg.norm(cr.point - point, axis=-1) > branch_gap
+        n_ahead = jnp.sum(ok & elsewhere & in_star(cand, star)[:, None])
+        # Snap to a vertex when the crossing is at an end of its edge.
+        new_kind = jnp.where((u <= tol) | (u >= 1 - tol), VERTEX, EDGE)
+        vertex = jnp.where(u <= tol, e0[c], e1[c])
+        new_idx = jnp.where(new_kind == VERTEX, vertex, cand[c]).astype(jnp.int32)
+        new_kind = new_kind.astype(jnp.int32)
+        point = jnp.where(new_kind == VERTEX, verts[vertex], point)
+        u = jnp.where(new_kind == VERTEX, 0.0, u)
+
+        full = count >= m - 1  # keep one slot for point 2
+        new_status = jnp.where(
+            reached,
+            Status.SUCCESS,
+            jnp.where(
+                ~found, Status.NO_CROSSING, jnp.where(full, Status.MAX_STEPS, -1)
+            ),
+        ).astype(jnp.int32)
+        append = reached | (found & ~full)
+        out_point = jnp.where(reached, p2, point)
+        out_kind = jnp.where(reached, FACE, new_kind).astype(jnp.int32)
+        out_elem = jnp.where(reached, end.face.astype(jnp.int32), new_idx).astype(
+            jnp.int32
+        )
+        out_param = jnp.where(reached, 0.0, u)
+        slot = jnp.where(append, count, m - 1)
+        keep = lambda buf, val: buf.at[slot].set(jnp.where(append, val, buf[slot]))  # noqa: E731
+        pts = keep(pts, out_point)
+        kinds = keep(kinds, out_kind)
+        elems = keep(elems, out_elem)
+        params = keep(params, out_param)
+        branch = keep(branch, (~reached) & (count > 1) & (n_ahead > 0))
+        moving = ~reached & found & ~full
+        return (
+            jnp.where(moving, point, pos),
+            jnp.where(moving, new_kind, kind),
+            jnp.where(moving, new_idx, idx),
+            count + append.astype(jnp.int32),
+            new_status,
+            pts,
+            kinds,
+            elems,
+            params,
+            branch,
+        )
+
+    pts = jnp.zeros((m, 3), dtype).at[0].set(p1)
+    kinds = jnp.zeros(m, jnp.int32)  # the endpoints are FACE points
+    elems = jnp.zeros(m, jnp.int32).at[0].set(start.face.astype(jnp.int32))
+    params = jnp.zeros(m, dtype)
+    branch = jnp.zeros(m, bool)
+    state = (
+        p1,
+        kind1,
+        idx1,
+        jnp.asarray(1, jnp.int32),
+        jnp.asarray(initial_status, jnp.int32),
+        pts,
+        kinds,
+        elems,
+        params,
+        branch,
+    )
+    state = jax.lax.while_loop(lambda s: s[4] < 0, step, state)
+    _, _, _, count, status, pts, kinds, elems, params, branch = state
+    pts = pad_tail(pts, count)
+    return Path(
+        points=pts,
+        kinds=kinds,
+        elements=elems,
+        params=params,
+        branch=branch,
+        count=count,
+        length=polyline_length(pts, count),
+        status=status,
+    )
