@@ -8,7 +8,8 @@ from typing import Literal
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from ._numerics import safe_normalize
+from ._errors import JaxgeoError
+from ._numerics import safe_norm, safe_normalize
 
 Weighting = Literal["uniform", "area", "angle"]
 
@@ -28,7 +29,7 @@ def _corner_angles(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
     e1 = safe_normalize(jnp.roll(p, -1, axis=1) - p)
     e2 = safe_normalize(jnp.roll(p, 1, axis=1) - p)
     cos = jnp.clip(jnp.sum(e1 * e2, -1), -1.0, 1.0)
-    sin = jnp.linalg.norm(jnp.cross(e1, e2), axis=-1)
+    sin = safe_norm(jnp.cross(e1, e2))  # finite gradient even at sin = 0
     return jnp.arctan2(sin, cos)  # (F, 3)
 
 
@@ -42,7 +43,13 @@ def vertex_normals(
     `"uniform"` is the paper's eq. (8)–(9): the sum of the unit normals of the faces
     at a vertex, normalised. `"area"` weights each face normal by the face area,
     `"angle"` by the face's corner angle at the vertex. Differentiable in
-    `vertices`.
+    `vertices` (a vertex in no face gets the zero vector, with a finite gradient).
+
+    Accuracy: every weighting is O(h) accurate on a general mesh (the first-order
+    errors of the face normals cancel only in point-symmetric fans, where it is
+    O(h²)); see `tests/test_normals.py` for measured constants.
+
+    **Raises** `JaxgeoError` for an unknown `weighting`.
     """
     if weighting == "uniform":
         w = jnp.broadcast_to(
@@ -55,7 +62,10 @@ def vertex_normals(
         n = face_normals(vertices, faces)
         w = n[:, None, :] * _corner_angles(vertices, faces)[..., None]
     else:
-        raise ValueError(f"unknown normal weighting {weighting!r}")
+        raise JaxgeoError(
+            f"unknown normal weighting {weighting!r}; expected 'uniform', 'area' or "
+            "'angle'"
+        )
     summed = jnp.zeros_like(vertices).at[faces.reshape(-1)].add(w.reshape(-1, 3))
     return safe_normalize(summed)
 
