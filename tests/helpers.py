@@ -1,0 +1,39 @@
+"""Shared test helpers: small meshes and random surface points."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import trimesh
+
+import jaxgeo as jg
+
+
+@functools.cache
+def unit_icosphere(subdivisions: int) -> jg.Mesh:
+    """Icosphere of radius 1 with every vertex exactly on the sphere."""
+    tm = trimesh.creation.icosphere(subdivisions)
+    v = tm.vertices / np.linalg.norm(tm.vertices, axis=1, keepdims=True)
+    return jg.Mesh(v, tm.faces)
+
+
+def face_points(mesh: jg.Mesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """`n` points strictly inside random faces (not vertices, not on edges):
+    returns (faces, barycentrics)."""
+    rng = np.random.default_rng(seed)
+    faces = rng.integers(0, mesh.n_faces, n)
+    bary = rng.dirichlet([3.0, 3.0, 3.0], n)
+    bary = 0.1 + 0.7 * bary  # keep away from edges, then renormalise
+    return faces, bary / bary.sum(1, keepdims=True)
+
+
+def position(mesh: jg.Mesh, face: int, bary: np.ndarray) -> np.ndarray:
+    return np.asarray(bary) @ np.asarray(mesh.vertices)[np.asarray(mesh.faces)[face]]
+
+
+def great_circle(p: np.ndarray, q: np.ndarray) -> float:
+    """Great-circle length between the radial projections of p and q on the unit
+    sphere (atan2 form: accurate near 0 and π)."""
+    p, q = p / np.linalg.norm(p), q / np.linalg.norm(q)
+    return float(np.arctan2(np.linalg.norm(np.cross(p, q)), p @ q))
