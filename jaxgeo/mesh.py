@@ -9,6 +9,8 @@ re-validating.
 
 from __future__ import annotations
 
+import io
+import logging
 import os
 import sys
 import warnings
@@ -390,10 +392,34 @@ def load_mesh(path: str | os.PathLike, *, merge_vertices: bool = True) -> Mesh:
         _fail(f"mesh file not found: {path}")
     if not os.path.isfile(path):
         _fail(f"mesh path is not a file: {path}")
+    ext = os.path.splitext(path)[1].lower().lstrip(".")
+    if not ext:
+        _fail(
+            f"cannot tell the format of mesh file {path}: it has no extension "
+            "(expected .obj, .ply, .stl, .off, …)"
+        )
     try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as e:
+        raise JaxgeoError(f"could not read mesh file {path}: {e}") from e
+    if not data.strip():
+        _fail(f"mesh file {path} is empty")
+    if ext in ("obj", "off"):
+        data = _utf8(data)
+    elif ext == "stl":
+        data = _stl_bytes(data, path)
+    trimesh_log = logging.getLogger("trimesh")
+    level = trimesh_log.level
+    try:
+        # trimesh logs (and then swallows or re-raises) parse failures; the
+        # JaxgeoError below says the same once.
+        trimesh_log.setLevel(logging.CRITICAL)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # numpy warnings on garbage numbers
-            loaded = trimesh.load(path, force="mesh", process=False)
+            loaded = trimesh.load(
+                io.BytesIO(data), file_type=ext, force="mesh", process=False
+            )
         if not isinstance(loaded, trimesh.Trimesh):
             _fail(f"mesh file {path} holds no triangle mesh")
         vertices = np.asarray(loaded.vertices)
@@ -402,8 +428,10 @@ def load_mesh(path: str | os.PathLike, *, merge_vertices: bool = True) -> Mesh:
         raise
     except Exception as e:  # trimesh raises many types on malformed files
         raise JaxgeoError(
-            f"could not read mesh file {path}: {type(e).__name__}: {e}"
+            f"could not read mesh file {path} as {ext.upper()}: {type(e).__name__}: {e}"
         ) from e
+    finally:
+        trimesh_log.setLevel(level)
     if faces.size == 0:
         _fail(f"mesh file {path} holds no triangles")
     if merge_vertices and vertices.ndim == 2 and faces.dtype.kind in "iu":
@@ -412,6 +440,49 @@ def load_mesh(path: str | os.PathLike, *, merge_vertices: bool = True) -> Mesh:
         return Mesh(vertices, faces)
     except JaxgeoError as e:
         raise JaxgeoError(f"invalid mesh in {path}: {e}") from e
+
+
+def _utf8(data: bytes) -> bytes:
+    """Text formats as valid UTF-8: undecodable bytes (a Latin-1 comment, binary
+    garbage) become U+FFFD, so trimesh never needs to guess the encoding."""
+    return data.decode("utf-8", errors="replace").encode("utf-8")
+
+
+def _stl_bytes(data: bytes, path: str) -> bytes:
+    """Check a binary STL's triangle count against its length (84-byte header,
+    then 50 bytes per triangle) and repair the two harmless mismatches: a wrong
+    count over a whole number of triangles, and trailing bytes after them."""
+    n = len(data)
+    count = int.from_bytes(data[80:84], "little") if n >= 84 else -1
+    if count >= 0 and n == 84 + 50 * count:
+        return data  # a consistent binary STL
+    if data.lstrip()[:5].lower() == b"solid":
+        return _utf8(data)  # ASCII STL
+    if n < 84:
+        _fail(
+            f"mesh file {path} is neither an ASCII STL (no 'solid' keyword) nor a "
+            f"binary STL (only {n} bytes, a binary STL header takes 84)"
+        )
+    if n > 84 + 50 * count > 84:
+        warnings.warn(
+            f"binary STL {path}: ignoring {n - 84 - 50 * count} bytes after its "
+            f"{count} triangles",
+            stacklevel=_caller_stacklevel(),
+        )
+        return data[: 84 + 50 * count]
+    if (n - 84) % 50 == 0 and n > 84:
+        held = (n - 84) // 50
+        warnings.warn(
+            f"binary STL {path}: the header says {count} triangles but the file "
+            f"holds {held}; reading {held}",
+            stacklevel=_caller_stacklevel(),
+        )
+        return data[:80] + held.to_bytes(4, "little") + data[84:]
+    _fail(
+        f"binary STL {path} is truncated or corrupt: its header says {count} "
+        f"triangles ({84 + 50 * count} bytes) but the file has {n} bytes"
+    )
+    raise AssertionError  # unreachable: _fail raises
 
 
 def _merge_identical(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
