@@ -14,11 +14,29 @@ from ._numerics import safe_norm, safe_normalize
 Weighting = Literal["uniform", "area", "angle"]
 
 
+def _check_mesh_arrays(vertices, faces) -> None:
+    """Shape and dtype checks on static information only, so they run at trace
+    time and cost nothing under `jax.jit`."""
+    if jnp.ndim(vertices) != 2 or jnp.shape(vertices)[1] != 3:
+        raise JaxgeoError(f"vertices must have shape (V, 3), got {jnp.shape(vertices)}")
+    if not jnp.issubdtype(jnp.result_type(vertices), jnp.floating):
+        raise JaxgeoError(
+            f"vertices must be floating point, got dtype {jnp.result_type(vertices)}"
+        )
+    if jnp.ndim(faces) != 2 or jnp.shape(faces)[1] != 3:
+        raise JaxgeoError(f"faces must have shape (F, 3), got {jnp.shape(faces)}")
+    if not jnp.issubdtype(jnp.result_type(faces), jnp.integer):
+        raise JaxgeoError(
+            f"faces must be an integer array, got dtype {jnp.result_type(faces)}"
+        )
+
+
 def face_normals(
     vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"], *, unit: bool = True
 ) -> Float[Array, "F 3"]:
     """Normals of the faces, `(b − a) × (c − a)`; unit length unless `unit=False`
     (then their length is twice the face area)."""
+    _check_mesh_arrays(vertices, faces)
     a, b, c = (vertices[faces[:, i]] for i in range(3))
     n = jnp.cross(b - a, c - a)
     return safe_normalize(n) if unit else n
@@ -49,8 +67,10 @@ def vertex_normals(
     errors of the face normals cancel only in point-symmetric fans, where it is
     O(h²)); see `tests/test_normals.py` for measured constants.
 
-    **Raises** `JaxgeoError` for an unknown `weighting`.
+    **Raises** `JaxgeoError` for an unknown `weighting`, or arrays of the wrong
+    shape or dtype (integer coordinates would make the normals integers).
     """
+    _check_mesh_arrays(vertices, faces)
     if weighting == "uniform":
         w = jnp.broadcast_to(
             face_normals(vertices, faces)[:, None, :], (*faces.shape, 3)

@@ -117,6 +117,22 @@ def test_weightings_match_a_loop_on_a_random_pyramid(weighting):
     assert (np.linalg.norm(others[:, 0] - got[0], axis=1) > 1e-3).all()
 
 
+@pytest.mark.parametrize(
+    "vertices, faces, pattern",
+    [
+        (CORNER_V[:, :2], CORNER_F, r"vertices must have shape \(V, 3\), got \(4, 2\)"),
+        (CORNER_V.astype(int), CORNER_F, "vertices must be floating point"),
+        (CORNER_V, CORNER_F[:, :2], r"faces must have shape \(F, 3\)"),
+        (CORNER_V, CORNER_F.astype(float), "faces must be an integer array"),
+    ],
+)
+def test_bad_arguments(vertices, faces, pattern):
+    with pytest.raises(JaxgeoError, match=pattern):
+        vertex_normals(vertices, faces)
+    with pytest.raises(JaxgeoError, match=pattern):
+        face_normals(vertices, faces)
+
+
 def test_unknown_weighting():
     with pytest.raises(JaxgeoError, match="unknown normal weighting 'mean'"):
         vertex_normals(CORNER_V, CORNER_F, "mean")
