@@ -36,28 +36,21 @@ def _cmd_path(args: argparse.Namespace) -> int:
     p2 = np.asarray(args.to if args.to else EXAMPLE_TO, dtype=np.float64)
     if args.mesh is not None and (args.from_ is None or args.to is None):
         raise SystemExit("jaxgeo path: --from and --to are required with a MESH")
-    path = shortest_path(
-        mesh, p1, p2, method=args.method, candidates=args.candidates
-    )
+    path = shortest_path(mesh, p1, p2, method=args.method, candidates=args.candidates)
     text = format_path(path, args.format)
     if args.output:
         with open(args.output, "w") as f:
             f.write(text)
-    elif args.format != "json":
-        sys.stdout.write(text)
+    else:
+        sys.stdout.write(text if text.endswith("\n") else text + "\n")
+    # The summary goes to stderr, so stdout carries the data alone.
     print(
-        f"{name}: {mesh.n_faces} faces; path {_fmt(p1)} -> {_fmt(p2)}",
+        f"{name}: {mesh.n_faces} faces; path {_fmt(p1)} -> {_fmt(p2)}\n"
+        f"length {float(path.length):.10g} ({int(path.count)} points, "
+        f"{int(path.n_branch_points)} branch points, method {args.method})"
+        + (f"; written to {args.output}" if args.output else ""),
         file=sys.stderr,
     )
-    n_branch = int(path.n_branch_points)
-    print(
-        f"length {float(path.length):.10g} ({int(path.count)} points, "
-        f"{n_branch} branch points, method {args.method})"
-        + (f"; written to {args.output}" if args.output else ""),
-        file=sys.stderr if args.format != "json" or args.output else sys.stdout,
-    )
-    if args.format == "json" and not args.output:
-        sys.stdout.write(text + "\n")
     return 0
 
 

@@ -1,0 +1,95 @@
+"""Endpoints: locating 3-D points on the mesh and the errors for bad endpoints."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgeo as jg
+from jaxgeo.locate import snap
+
+from .helpers import unit_icosphere
+
+MESH = unit_icosphere(2)
+
+
+def test_locate_recovers_face_and_barycentrics():
+    rng = np.random.default_rng(0)
+    v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
+    for face in rng.integers(0, MESH.n_faces, 10):
+        bary = rng.dirichlet([2, 2, 2])
+        p = bary @ v[f[face]]
+        sp, dist = jg.locate(MESH, jnp.asarray(p))
+        assert int(sp.face) == face
+        np.testing.assert_allclose(sp.bary, bary, atol=1e-12)
+        assert float(dist) < 1e-12
+
+
+def test_points_on_vertices_and_edges_snap():
+    v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
+    sp, _ = jg.locate(MESH, jnp.asarray(v[f[3, 1]]))
+    kind, idx = snap(MESH, sp, 1e-9)
+    assert (int(kind), int(idx)) == (2, f[3, 1])
+    mid = 0.5 * (v[f[3, 0]] + v[f[3, 2]])
+    sp, _ = jg.locate(MESH, jnp.asarray(mid))
+    kind, idx = snap(MESH, sp, 1e-9)
+    assert int(kind) == 1
+    assert set(np.asarray(MESH.edges)[int(idx)]) == {f[3, 0], f[3, 2]}
+
+
+def test_path_from_a_vertex_to_an_edge_point():
+    v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
+    a = v[f[0, 0]]
+    b = 0.5 * (v[f[200, 1]] + v[f[200, 2]])
+    path = jg.shortest_path(MESH, a, b)
+    assert int(path.status) == jg.Status.SUCCESS
+    np.testing.assert_allclose(path.polyline()[[0, -1]], [a, b], atol=1e-12)
+
+
+def test_far_point_raises_and_names_the_distance():
+    with pytest.raises(jg.JaxgeoError, match="too far from the surface"):
+        jg.shortest_path(MESH, np.array([0.0, 0.0, 3.0]), np.array([1.0, 0, 0]))
+
+
+def test_far_point_under_jit_is_a_status():
+    import jax
+
+    lengths_status = jax.jit(lambda a, b: jg.shortest_path(MESH, a, b).status)(
+        jnp.array([0.0, 0.0, 3.0]), jnp.array([1.0, 0, 0])
+    )
+    assert int(lengths_status) == jg.Status.FAR_FROM_SURFACE
+
+
+def test_points_on_different_components_raise():
+    v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
+    two = jg.Mesh(np.vstack([v, v + [5.0, 0, 0]]), np.vstack([f, f + len(v)]))
+    with pytest.raises(jg.JaxgeoError, match="different connected components"):
+        jg.shortest_path(two, v[0], v[0] + [5.0, 0, 0])
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (np.array([0.0, 1.0]), r"shape \(3,\)"),
+        (np.array([np.nan, 0.0, 1.0]), "NaN"),
+        (np.array(["a", "b", "c"]), "dtype"),
+    ],
+)
+def test_bad_endpoints_raise(bad, message):
+    with pytest.raises(jg.JaxgeoError, match=message):
+        jg.shortest_path(MESH, bad, np.array([1.0, 0, 0]))
+
+
+def test_bad_surface_point_raises():
+    with pytest.raises(jg.JaxgeoError, match="out of range"):
+        jg.shortest_path(
+            MESH, jg.SurfacePoint(10**6, np.ones(3) / 3), np.array([1.0, 0, 0])
+        )
+    with pytest.raises(jg.JaxgeoError, match="sum to 1"):
+        jg.shortest_path(
+            MESH, jg.SurfacePoint(0, np.array([0.5, 0.5, 0.5])), np.array([1.0, 0, 0])
+        )
+
+
+def test_mesh_argument_must_be_a_mesh():
+    with pytest.raises(jg.JaxgeoError, match="jaxgeo.Mesh"):
+        jg.shortest_path(np.zeros((3, 3)), np.zeros(3), np.zeros(3))
