@@ -44,6 +44,17 @@ def _edge_arrays(mesh):
 solve_all = jax.jit(solve_edges)
 
 
+def _residuals(cr, a, b, x1, x2, n1, n2):
+    """Residual of (16) at both root lanes of every edge: (E, 2, 3)."""
+    y = jnp.stack([cr.u, cr.t, cr.zeta], -1)
+
+    def per_edge(yy, x1, x2, n1, n2):
+        args = (a, b - a, x1, x2 - x1, n1, n2 - n1)
+        return jax.vmap(lambda y1: residual(y1, args))(yy)
+
+    return jax.vmap(per_edge)(y, x1, x2, n1, n2)
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_newton_solutions_have_tiny_residual(seed):
     mesh, a, b = _random_mesh_and_chords(seed)
@@ -51,13 +62,7 @@ def test_newton_solutions_have_tiny_residual(seed):
     for ai, bi in zip(a, b):
         cr = solve_all(jnp.asarray(ai), jnp.asarray(bi), x1, x2, n1, n2)
         assert int(cr.valid.sum()) > 0
-        y = jnp.stack([cr.u, cr.t, cr.zeta], -1)  # (E, 2, 3)
-        args = (ai, bi - ai, x1, x2 - x1, n1, n2 - n1)
-        r = jax.vmap(
-            lambda yy, x1, dx, n1, dn: jax.vmap(
-                lambda y1: residual(y1, (args[0], args[1], x1, dx, n1, dn))
-            )(yy)
-        )(y, *args[2:])
+        r = _residuals(cr, jnp.asarray(ai), jnp.asarray(bi), x1, x2, n1, n2)
         # Newton stops at 1e-12 (atol/rtol); the residual is a few ulps of the
         # unit-scale coordinates, far below the 1e-10 acceptance bound.
         worst = float(jnp.max(jnp.where(cr.valid[..., None], jnp.abs(r), 0.0)))
