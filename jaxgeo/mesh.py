@@ -219,47 +219,53 @@ def _caller_stacklevel() -> int:
     return level
 
 
-def _orient(f: np.ndarray, edge_faces: np.ndarray) -> np.ndarray:
-    """Reorient faces consistently by a breadth-first walk over face adjacency."""
-    inner = edge_faces[edge_faces[:, 1] >= 0]
+def _runs_forward(f: np.ndarray, face: np.ndarray, u: np.ndarray, w: np.ndarray):
+    """Whether each `face` runs through its edge as u → w (else w → u)."""
+    nxt = np.roll(f[face], -1, axis=1)
+    return ((f[face] == u[:, None]) & (nxt == w[:, None])).any(axis=1)
+
+
+def _orient(f: np.ndarray, edges: np.ndarray, edge_faces: np.ndarray) -> np.ndarray:
+    """Reorient faces consistently, keeping each component's majority orientation.
+
+    Vectorised on the orientation double cover: node `(face, k)` is the face kept
+    (k = 0) or reversed (k = 1). Across an interior edge whose two faces run the
+    same way, one of them must be reversed, so `(a, k)` links to `(b, 1 − k)`;
+    otherwise `(a, k)` links to `(b, k)`. A component is orientable iff `(f, 0)`
+    and `(f, 1)` fall into different connected components of the cover, which
+    then come in mirror pairs: keep the one holding more `k = 0` nodes.
+    """
     n = f.shape[0]
-    graph = sp.coo_matrix(
-        (np.ones(len(inner)), (inner[:, 0], inner[:, 1])), shape=(n, n)
-    ).tocsr()
-    flip = np.zeros(n, dtype=bool)
-    seen = np.zeros(n, dtype=bool)
-
-    def same_direction(a: int, b: int) -> bool:
-        ea = {(f[a, i], f[a, (i + 1) % 3]) for i in range(3)}
-        return any((f[b, i], f[b, (i + 1) % 3]) in ea for i in range(3))
-
-    for root in range(n):
-        if seen[root]:
-            continue
-        order, parent = sp.csgraph.breadth_first_order(
-            graph, root, directed=False, return_predecessors=True
-        )
-        seen[order] = True
-        for face in order[1:]:
-            p = parent[face]
-            flip[face] = flip[p] ^ same_direction(face, p)
-        if flip[order].mean() > 0.5:  # keep the majority's orientation
-            flip[order] = ~flip[order]
-    oriented = np.where(flip[:, None], f[:, ::-1], f)
-    half = oriented[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    directed, counts = np.unique(half, axis=0, return_counts=True)
-    if (counts > 1).any():
+    inner = edge_faces[:, 1] >= 0
+    a, b = edge_faces[inner, 0], edge_faces[inner, 1]
+    u, w = edges[inner, 0], edges[inner, 1]
+    same = _runs_forward(f, a, u, w) == _runs_forward(f, b, u, w)
+    rows = np.concatenate([a, a + n])
+    cols = np.concatenate([b + n * same, b + n * (~same)])
+    cover = sp.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(2 * n, 2 * n))
+    _, label = connected_components(cover, directed=False)
+    kept, reversed_ = label[:n], label[n:]
+    twisted = kept == reversed_
+    if twisted.any():
         _fail(
             "the surface is not orientable (like a Möbius strip): no choice of face "
-            "orientations is consistent; it still flips across the edges",
-            directed[counts > 1],
+            "orientations is consistent, on the component(s) of faces",
+            np.flatnonzero(twisted),
         )
+    # votes[L]: faces whose as-given orientation lies in cover component L; ties go
+    # to the mirror holding the lowest-numbered face as given.
+    votes = np.bincount(kept, minlength=label.max() + 1)
+    lowest = np.full(label.max() + 1, 2 * n)
+    np.minimum.at(lowest, label, np.arange(2 * n))
+    flip = (votes[reversed_] > votes[kept]) | (
+        (votes[reversed_] == votes[kept]) & (lowest[reversed_] < lowest[kept])
+    )
     warnings.warn(
         f"{int(flip.sum())} faces were inconsistently oriented and have been "
         "reoriented",
         stacklevel=_caller_stacklevel(),
     )
-    return oriented
+    return np.where(flip[:, None], f[:, ::-1], f)
 
 
 def _vertex_faces(f: np.ndarray, n_vertices: int) -> np.ndarray:
@@ -312,7 +318,7 @@ class Mesh(eqx.Module):
         edges, edge_faces, face_edges, consistent = _edges(f)
         _check_vertex_fans(f, edges, edge_faces, v.shape[0])
         if not consistent:
-            f = _orient(f, edge_faces)
+            f = _orient(f, edges, edge_faces)
             edges, edge_faces, face_edges, _ = _edges(f)
         adjacency = sp.coo_matrix(
             (

@@ -263,6 +263,24 @@ def test_inconsistent_orientation_is_fixed(fraction):
     assert np.array_equal(out, f if flipped.mean() < 0.5 else f[:, ::-1])
 
 
+def test_orientation_majority_is_per_component():
+    v, f = icosphere(1)
+    rng = np.random.default_rng(5)
+    first = rng.random(len(f)) < 0.2  # mostly as given
+    second = rng.random(len(f)) < 0.8  # mostly reversed
+    bad = np.concatenate(
+        [
+            np.where(first[:, None], f[:, ::-1], f),
+            np.where(second[:, None], f[:, ::-1], f) + len(v),
+        ]
+    )
+    with pytest.warns(UserWarning, match=f"{first.sum() + (~second).sum()} faces"):
+        mesh = Mesh(np.concatenate([v, v + [3.0, 0.0, 0.0]]), bad)
+    out = np.asarray(mesh.faces)
+    assert np.array_equal(out[: len(f)], f)
+    assert np.array_equal(out[len(f) :], f[:, ::-1] + len(v))
+
+
 def test_orientation_warning_points_at_caller():
     v, f = grid(2, 2)
     f = f.copy()
