@@ -1,0 +1,463 @@
+"""Geodesics on the smooth surface the Phong normals define.
+
+The surface is the Phong tessellation of the mesh with shape factor α (default ½,
+see `jaxgeo._phong`). A path is given by a strip: a sequence of nodes, the start
+point, then crossings of mesh edges (or contacts with mesh vertices), then the end
+point. Consecutive nodes share a face; between them the path is the straight
+segment in that face's barycentric coordinates, lifted by the Phong map Φ. A
+crossing of edge e = (a, b) at parameter u lies at Φ((1 − u)·a + u·b), on the
+lifted edge curve, which both faces of e share, so the path is continuous.
+
+The length L(u) = Σ_s ∫₀¹ |dΦ_s/dt| dt (Gauss–Legendre per segment) is minimised
+over the crossing parameters u ∈ [0, 1]ⁿ. Segment s depends on u_s and u_{s+1}
+only, so the Hessian is tridiagonal; the minimiser is a projected, damped
+(Levenberg–Marquardt) Newton method: (H + λ·I)·δ = −g on the free variables, a
+step is accepted when it shortens the path (or, within rounding of L, lowers the
+gradient), λ shrinks on success and grows on failure. Parameters at a bound whose
+gradient pushes outwards are held there (the path touches that vertex). Iterations
+continue until the projected gradient is below `gtol`·(mean edge length), about
+1e-12 by default.
+
+Differentiation. At the solution L is stationary in the free u (and the bounds do
+not depend on the mesh), so by the envelope theorem dL/dθ = ∂L/∂θ at fixed u* for
+every input θ (vertices, normals through the vertices, endpoints). The solver runs
+on `stop_gradient` inputs and the optimal u* is `stop_gradient`-ed; the length is
+then re-evaluated from the live inputs. The crossing points' derivatives are
+likewise partial derivatives at fixed u* (not the total derivative of the
+crossings).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from ._numerics import safe_norm
+from ._phong import phong_point, phong_velocity, segment_length
+from .locate import SurfacePoint, snap
+from .mesh import Mesh
+from .normals import Weighting, vertex_normals
+from .path import EDGE, FACE, VERTEX
+
+__all__ = ["SmoothPath", "phong_point", "smooth_geodesic"]
+
+
+class SmoothPath(eqx.Module):
+    """A geodesic of the Phong surface on a fixed strip.
+
+    Buffers have a fixed capacity `M` (nodes, endpoints included); the first
+    `count` are the path, the rest repeat the end point.
+
+    - `points`: `(M, 3)` the nodes on the smooth surface.
+    - `kinds`: `(M,)` 0 endpoint, 1 edge crossing, 2 vertex (as in `Path`).
+    - `elements`: `(M,)` face (endpoints), edge or vertex index.
+    - `params`: `(M,)` u on the edge for crossings,
+      flat point (1 − u)·V[edges[e, 0]] + u·V[edges[e, 1]].
+    - `faces`: `(M − 1,)` the face each segment runs in.
+    - `count`, `length`.
+    - `converged`: the projected gradient reached `gtol`.
+    - `grad_norm`: max-norm of the projected gradient dL/du at the end.
+    - `hit_vertex`: some crossing sits at an end of its edge with the gradient
+      pushing outwards: the smooth geodesic wants to leave the strip there (see
+      `smooth_shortest_path(..., repair=True)`), or it really wraps the vertex.
+    - `valid_strip`: every pair of consecutive nodes shares a face.
+    - `iterations`: Newton iterations taken.
+    """
+
+    points: Float[Array, "M 3"]
+    kinds: Int[Array, " M"]
+    elements: Int[Array, " M"]
+    params: Float[Array, " M"]
+    faces: Int[Array, " M-1"]
+    count: Int[Array, ""]
+    length: Float[Array, ""]
+    converged: Bool[Array, ""]
+    grad_norm: Float[Array, ""]
+    hit_vertex: Bool[Array, ""]
+    valid_strip: Bool[Array, ""]
+    iterations: Int[Array, ""]
+
+
+# ----------------------------------------------------------------------- the strip
+
+
+class _Strip(eqx.Module):
+    """Per segment s (between nodes s and s+1): its face and the barycentric
+    coordinates of its ends in that face, affine in the node parameters,
+    b_start = a + u_s·b, b_end = c + u_{s+1}·d."""
+
+    face: Int[Array, " S"]
+    a: Float[Array, "S 3"]
+    b: Float[Array, "S 3"]
+    c: Float[Array, "S 3"]
+    d: Float[Array, "S 3"]
+    free: Bool[Array, " M"]
+    valid: Bool[Array, ""]
+
+
+def _star(mesh: Mesh, kind, index, width: int):
+    """Faces around an edge or vertex, padded with −1 to `width`."""
+
+    def pad(x):
+        return jnp.concatenate([x, jnp.full(width - x.shape[0], -1, x.dtype)])
+
+    edge = pad(mesh.edge_faces[index].astype(jnp.int32))
+    vertex = pad(mesh.vertex_faces[index].astype(jnp.int32))
+    return jnp.where(kind == EDGE, edge, vertex)
+
+
+def _build_strip(
+    mesh: Mesh,
+    start: SurfacePoint,
+    end: SurfacePoint,
+    kinds: Int[Array, " M"],
+    elements: Int[Array, " M"],
+    count: Int[Array, ""],
+    snap_tol: float,
+) -> _Strip:
+    m = kinds.shape[0]
+    dtype = mesh.vertices.dtype
+    idx = jnp.arange(m)
+    is_end = idx >= count - 1
+    kinds = jnp.where(idx == 0, FACE, jnp.where(is_end, FACE, kinds))
+    elements = jnp.where(
+        idx == 0, start.face, jnp.where(is_end, end.face, elements)
+    ).astype(jnp.int32)
+    bary = jnp.where((idx == 0)[:, None], start.bary, end.bary).astype(dtype)
+
+    width = max(mesh.vertex_faces.shape[1], 2)
+
+    def node(kind, elem, bary):
+        e = mesh.edges[jnp.clip(elem, 0, mesh.n_edges - 1)]
+        fv = mesh.faces[jnp.clip(elem, 0, mesh.n_faces - 1)]
+        v = jnp.clip(elem, 0, mesh.n_vertices - 1)
+        minus = jnp.asarray(-1, jnp.int32)
+        vids = jnp.where(
+            kind == EDGE,
+            jnp.stack([e[0], e[1], minus]),
+            jnp.where(kind == VERTEX, jnp.stack([v, minus, minus]), fv),
+        ).astype(jnp.int32)
+        one = jnp.asarray([1.0, 0.0, 0.0], dtype)
+        base = jnp.where(kind == FACE, bary, one)
+        direction = jnp.where(
+            kind == EDGE, jnp.asarray([-1.0, 1.0, 0.0], dtype), jnp.zeros(3, dtype)
+        )
+        # vertices the node's face must contain
+        support = jnp.where(kind == FACE, bary > snap_tol, vids >= 0)
+        sp = SurfacePoint(jnp.clip(elem, 0, mesh.n_faces - 1), bary)
+        s_kind, s_idx = snap(mesh, sp, snap_tol)
+        own = jnp.where(kind == FACE, elem, -1).reshape(1).astype(jnp.int32)
+        star = jnp.where(
+            kind == FACE,
+            jnp.where(s_kind == FACE, -1, _star(mesh, s_kind, s_idx, width)),
+            _star(mesh, kind, elem, width),
+        )
+        return vids, base, direction, support, jnp.concatenate([own, star])
+
+    vids, base, direction, support, stars = jax.vmap(node)(kinds, elements, bary)
+
+    def segment(s):
+        cand = jnp.concatenate([stars[s], stars[s + 1]])
+        fv = mesh.faces[jnp.maximum(cand, 0)]  # (C, 3)
+
+        def contains(n):  # (C,) does the candidate hold node n's support
+            hit = jnp.any(vids[n][None, :, None] == fv[:, None, :], axis=2)
+            return jnp.all(hit | ~support[n][None, :], axis=1)
+
+        ok = (cand >= 0) & contains(s) & contains(s + 1)
+        face = cand[jnp.argmax(ok)]
+        corners = mesh.faces[jnp.maximum(face, 0)]
+
+        def match(n):  # (3 corners, 3 slots)
+            return (corners[:, None] == vids[n][None, :]).astype(dtype)
+
+        ms, me = match(s), match(s + 1)
+        return (
+            face,
+            ms @ base[s],
+            ms @ direction[s],
+            me @ base[s + 1],
+            me @ direction[s + 1],
+            jnp.any(ok),
+        )
+
+    face, a, b, c, d, ok = jax.vmap(segment)(jnp.arange(m - 1))
+    free = (kinds == EDGE) & (idx < count - 1)
+    return _Strip(face, a, b, c, d, free, jnp.all(ok))
+
+
+# ----------------------------------------------------------------------- the length
+
+
+def _face_data(faces, strip, vertices, normals):
+    fv = faces[strip.face]
+    return vertices[fv], normals[fv]
+
+
+def _lengths(faces, strip, vertices, normals, u, alpha, n_quad):
+    """Length of every segment, (S,)."""
+    corners, ns = _face_data(faces, strip, vertices, normals)
+    b0 = strip.a + u[:-1, None] * strip.b
+    b1 = strip.c + u[1:, None] * strip.d
+    return jax.vmap(segment_length, in_axes=(0, 0, 0, 0, None, None))(
+        corners, ns, b0, b1, alpha, n_quad
+    )
+
+
+def _derivatives(faces, strip, vertices, normals, u, alpha, n_quad):
+    """L, its gradient in u, the tridiagonal Hessian (diag, off), and per node the
+    one-sided growth rate of its adjacent zero-length segments (their kink)."""
+    corners, ns = _face_data(faces, strip, vertices, normals)
+
+    def seg(x, cs, nn, a, b, c, d):
+        return segment_length(cs, nn, a + x[0] * b, c + x[1] * d, alpha, n_quad)
+
+    def kink(x, cs, nn, a, b, c, d):
+        # a segment whose ends coincide grows like |∂X/∂u| when either end moves
+        b0, b1 = a + x[0] * b, c + x[1] * d
+        zero = jnp.max(jnp.abs(b1 - b0)) <= 1e-14
+
+        def rate(bb, dd):
+            return safe_norm(phong_velocity(cs, nn, bb, dd, alpha))
+
+        return jnp.where(zero, jnp.stack([rate(b0, b), rate(b1, d)]), 0.0)
+
+    x = jnp.stack([u[:-1], u[1:]], axis=1)
+    args = (corners, ns, strip.a, strip.b, strip.c, strip.d)
+
+    def all3(x, *args):
+        grad = jax.jacfwd(seg)
+        return seg(x, *args), grad(x, *args), jax.jacfwd(grad)(x, *args)
+
+    lens, grads, hess = jax.vmap(all3)(x, *args)
+    kinks = jax.vmap(kink)(x, *args)
+
+    def nodes(pair):  # (S, 2) per-segment ends → (M,) per node
+        zero = jnp.zeros(1, u.dtype)
+        return jnp.concatenate([pair[:, 0], zero]) + jnp.concatenate([zero, pair[:, 1]])
+
+    g = nodes(grads)
+    diag = nodes(jnp.stack([hess[:, 0, 0], hess[:, 1, 1]], axis=1))
+    return jnp.sum(lens), g, diag, hess[:, 0, 1], nodes(kinks)
+
+
+# ----------------------------------------------------------------------- the solver
+
+#: Parameters this close to 0 or 1 are put on the bound: a crossing pulled onto a
+#: vertex converges there quadratically, and the segments between crossings at the
+#: same vertex have zero length, where the length has a kink (|x| at 0) that a
+#: Newton step cannot resolve. On the bound, the projection holds it.
+_SNAP = 1e-10
+
+
+def _snap(u):
+    return jnp.where(u < _SNAP, 0.0, jnp.where(u > 1.0 - _SNAP, 1.0, u))
+
+
+def _tridiagonal_solve(diag, off, rhs):
+    """Thomas algorithm for the symmetric tridiagonal system (diag, off)·x = rhs
+    (no pivoting: used on damped, held-row-regularised Newton matrices; a
+    breakdown gives non-finite entries, which the caller rejects)."""
+
+    def forward(carry, xs):
+        c_prev, d_prev = carry
+        a, b, c, r = xs  # sub-diagonal, diagonal, super-diagonal, rhs
+        m = b - a * c_prev
+        c_new = c / m
+        d_new = (r - a * d_prev) / m
+        return (c_new, d_new), (c_new, d_new)
+
+    zero = jnp.zeros(1, diag.dtype)
+    sub = jnp.concatenate([zero, off])
+    sup = jnp.concatenate([off, zero])
+    init = (jnp.zeros((), diag.dtype), jnp.zeros((), diag.dtype))
+    _, (cp, dp) = jax.lax.scan(forward, init, (sub, diag, sup, rhs))
+
+    def backward(x_next, xs):
+        c, d = xs
+        x = d - c * x_next
+        return x, x
+
+    _, x = jax.lax.scan(backward, jnp.zeros((), diag.dtype), (cp, dp), reverse=True)
+    return x
+
+
+def _minimise(faces, strip, vertices, normals, u0, alpha, n_quad, gtol, max_steps):
+    """Projected Levenberg–Marquardt Newton on the tridiagonal Hessian.
+
+    Each iteration evaluates L, g, H at a trial point; the trial is accepted when
+    it is shorter (or level within rounding and flatter); then the next trial is
+    u + δ with (H + λ·|diag H|)·δ = −g on the free rows, clipped to [0, 1]."""
+    dtype = u0.dtype
+    eps = jnp.finfo(dtype).eps
+    free = strip.free
+
+    def projected(u, g, kink):
+        # at a bound, held when the one-sided derivative inwards is ≥ 0
+        held = ~free | ((u <= 0) & (g + kink >= 0)) | ((u >= 1) & (kink - g >= 0))
+        return held, jnp.where(held, 0.0, g)
+
+    def pg_norm(cur):
+        u, _, g, _, _, kink = cur
+        return jnp.max(jnp.abs(projected(u, g, kink)[1]), initial=0.0)
+
+    def cond(state):
+        cur, _, _, it, n_fail = state
+        going = (pg_norm(cur) > gtol) & (it < max_steps) & (n_fail < 40)
+        return (it == 0) | going
+
+    def body(state):
+        cur, trial, lam, it, n_fail = state
+        new = (trial, *_derivatives(faces, strip, vertices, normals, trial, alpha,
+                                    n_quad))  # fmt: skip
+        first = it == 0
+        shorter = new[1] < cur[1]
+        level = new[1] <= cur[1] + 8 * eps * jnp.abs(cur[1])
+        flatter = pg_norm(new) < pg_norm(cur)
+        accept = first | (jnp.isfinite(new[1]) & (shorter | (level & flatter)))
+        cur = jax.tree.map(lambda a, b: jnp.where(accept, a, b), new, cur)
+        lam = jnp.where(
+            first, lam, jnp.where(accept, jnp.maximum(lam * 0.25, 1e-12), lam * 8.0)
+        )
+        u, _, g, diag, off, kink = cur
+        held, pg = projected(u, g, kink)
+        scale = jnp.maximum(jnp.abs(diag), jnp.finfo(dtype).tiny)
+        dd = jnp.where(held, 1.0, diag + lam * scale)
+        lo = jnp.where(held[1:] | held[:-1], 0.0, off)
+        step = _tridiagonal_solve(dd, lo, -pg)
+        step = jnp.where(held | ~jnp.isfinite(step), 0.0, step)
+        trial = jnp.where(free, _snap(jnp.clip(u + step, 0.0, 1.0)), u)
+        return cur, trial, lam, it + 1, jnp.where(accept, 0, n_fail + 1)
+
+    u0 = jnp.where(free, _snap(u0), u0)
+    m = u0.shape[0]
+    z = jnp.zeros(m, dtype)
+    cur = (u0, jnp.asarray(jnp.inf, dtype), z, z + 1, z[1:], z)
+    state = (cur, u0, jnp.asarray(1e-3, dtype), 0, 0)
+    cur, _, _, it, _ = jax.lax.while_loop(cond, body, state)
+    u = cur[0]
+    at_end = free & ((u <= 0) | (u >= 1))
+    return u, pg_norm(cur), jnp.any(at_end), it
+
+
+# ----------------------------------------------------------------------- entry point
+
+
+def smooth_geodesic(
+    mesh: Mesh,
+    start: SurfacePoint,
+    end: SurfacePoint,
+    elements: Int[ArrayLike, " n"],
+    params: Float[ArrayLike, " n"],
+    kinds: Int[ArrayLike, " n"] | None = None,
+    *,
+    count: Int[ArrayLike, ""] | None = None,
+    alpha: float = 0.5,
+    normals: Weighting | Float[Array, "V 3"] = "uniform",
+    n_quad: int = 4,
+    gtol: float = 1e-12,
+    max_steps: int = 200,
+) -> SmoothPath:
+    """The geodesic of the Phong surface through a fixed strip of edges.
+
+    **Arguments:**
+
+    - `mesh`, `start`, `end`: the mesh and the endpoints (`SurfacePoint`s).
+    - `elements`: `(n,)` the crossed edges in order (or vertices, see `kinds`);
+      for instance `Path.elements[1 : count - 1]` of a laser or exact path.
+    - `params`: `(n,)` initial parameters u on those edges (ignored for vertices).
+    - `kinds`: `(n,)` 1 = edge crossing (default), 2 = a vertex the path passes
+      through (held fixed: the vertex lies on the smooth surface).
+    - `count`: the number of live entries of `elements` (default all); the rest
+      is padding, so one compiled shape serves paths of different lengths.
+    - `alpha`: Phong shape factor; ½ is the consistent one (see `jaxgeo._phong`).
+    - `normals`: a vertex-normal weighting (`"uniform"`: eq. 8–9) or a `(V, 3)`
+      array of unit normals.
+    - `n_quad`: Gauss–Legendre points per segment.
+    - `gtol`: stop when max |dL/du| on the free crossings ≤ gtol·mean edge length.
+    - `max_steps`: Newton iterations allowed.
+
+    **Returns:** a `SmoothPath`. Its `length` and `points` are differentiable in
+    `mesh.vertices` (normals included), `start.bary` and `end.bary`: by the envelope
+    theorem the gradient of the length is its partial derivative at the optimal,
+    `stop_gradient`-ed parameters u* (exact, since L is stationary in u* and the
+    bounds 0 ≤ u ≤ 1 do not depend on the inputs). Polishing to `gtol` makes this
+    gradient accurate to about gtol².
+    """
+    dtype = mesh.vertices.dtype
+    elements = jnp.asarray(elements, jnp.int32).reshape(-1)
+    params = jnp.asarray(params, dtype).reshape(-1)
+    n = elements.shape[0]
+    kinds = (
+        jnp.full(n, EDGE, jnp.int32)
+        if kinds is None
+        else jnp.asarray(kinds, jnp.int32).reshape(-1)
+    )
+    count = jnp.asarray(n if count is None else count, jnp.int32)
+    if isinstance(normals, str):
+        nrm = vertex_normals(mesh.vertices, mesh.faces, normals)
+    else:
+        nrm = jnp.asarray(normals, dtype)
+    zero_i = jnp.zeros(1, jnp.int32)
+    node_kinds = jnp.concatenate([zero_i, kinds, zero_i])
+    node_elems = jnp.concatenate([zero_i, elements, zero_i])
+    u0 = jnp.concatenate([jnp.zeros(1, dtype), jnp.clip(params, 0, 1), jnp.zeros(1)])
+    n_nodes = count + 2
+    u0 = jnp.where(jnp.arange(n + 2) < n_nodes - 1, u0, 0.0)
+    return _solve(
+        mesh, nrm, start, end, node_kinds, node_elems, u0, n_nodes,
+        alpha, n_quad, gtol, max_steps,
+    )  # fmt: skip
+
+
+@eqx.filter_jit
+def _solve(
+    mesh, nrm, start, end, kinds, elements, u0, count, alpha, n_quad, gtol, max_steps
+):
+    dtype = mesh.vertices.dtype
+    start = SurfacePoint(jnp.asarray(start.face), jnp.asarray(start.bary, dtype))
+    end = SurfacePoint(jnp.asarray(end.face), jnp.asarray(end.bary, dtype))
+    snap_tol = 1e-12
+    sg = jax.lax.stop_gradient
+    strip0 = _build_strip(
+        sg(mesh), sg(start), sg(end), kinds, elements, count, snap_tol
+    )
+    tol = gtol * sg(mesh.mean_edge_length)
+    u, gnorm, hit, it = _minimise(
+        mesh.faces, strip0, sg(mesh.vertices), sg(nrm), u0, alpha, n_quad, tol,
+        max_steps,
+    )  # fmt: skip
+    u = sg(u)
+    # Re-evaluate from the live inputs (envelope theorem).
+    strip = _build_strip(mesh, start, end, kinds, elements, count, snap_tol)
+    lens = _lengths(mesh.faces, strip, mesh.vertices, nrm, u, alpha, n_quad)
+    b0 = strip.a + u[:-1, None] * strip.b
+    b_last = strip.c[-1] + u[-1] * strip.d[-1]
+    fv = mesh.faces[strip.face]
+    lift = jax.vmap(phong_point, in_axes=(0, 0, 0, None))
+    pts = lift(mesh.vertices[fv], nrm[fv], b0, alpha)
+    last = phong_point(mesh.vertices[fv[-1]], nrm[fv[-1]], b_last, alpha)
+    pts = jnp.concatenate([pts, last[None]])
+    idx = jnp.arange(kinds.shape[0])
+    pts = jnp.where((idx < count)[:, None], pts, pts[jnp.maximum(count - 1, 0)])
+    is_end = (idx == 0) | (idx >= count - 1)
+    out_kinds = jnp.where(is_end, FACE, kinds)
+    out_elems = jnp.where(
+        idx == 0, start.face, jnp.where(idx >= count - 1, end.face, elements)
+    )
+    return SmoothPath(
+        points=pts,
+        kinds=out_kinds.astype(jnp.int32),
+        elements=out_elems.astype(jnp.int32),
+        params=jnp.where(strip.free, u, 0.0),
+        faces=strip.face,
+        count=count,
+        length=jnp.sum(lens),
+        converged=gnorm <= tol,
+        grad_norm=gnorm,
+        hit_vertex=hit,
+        valid_strip=strip.valid,
+        iterations=jnp.asarray(it, jnp.int32),
+    )
