@@ -1,0 +1,292 @@
+"""Face corridors: the combinatorial side of exact geodesics (numpy, outside jit).
+
+A *corridor* is a sequence of face ids in which consecutive faces share an edge,
+from a face holding the start point to a face holding the end point. This module
+holds the per-mesh tables the corridor algorithms need (`Topology`), walks around
+vertex fans, cleans corridors (no immediate back-tracks, no useless faces at the
+ends) and builds a corridor from a Dijkstra shortest path on the edge graph.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+
+from ._errors import JaxgeoError
+from .mesh import Mesh
+
+
+class EndPoint:
+    """A surface point as a face and barycentric coordinates, plus its *support*:
+    the vertices with a positive coordinate (one for a vertex, two for a point on
+    an edge, three inside a face)."""
+
+    def __init__(self, topo: Topology, face: int, bary: np.ndarray):
+        face = int(face)
+        if not 0 <= face < topo.faces.shape[0]:
+            raise JaxgeoError(f"face index {face} out of range")
+        bary = np.asarray(bary, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(bary)) or np.any(bary < 0) or bary.sum() <= 0:
+            raise JaxgeoError(
+                f"barycentric coordinates must be finite, >= 0 and not all 0, "
+                f"got {bary}"
+            )
+        self.face = face
+        self.bary = bary / bary.sum()
+        corners = topo.faces[face]
+        self.support = {int(corners[i]): float(self.bary[i]) for i in range(3)}
+        self.support = {v: w for v, w in self.support.items() if w > 0}
+        self.xyz = self.bary @ topo.vertices[corners]
+
+    @property
+    def vertex(self) -> int:
+        """The mesh vertex the point sits on, or -1."""
+        return next(iter(self.support)) if len(self.support) == 1 else -1
+
+    def in_face(self, topo: Topology, face: int) -> bool:
+        """Whether the point lies in the closure of `face`."""
+        return set(self.support) <= set(topo.faces[face].tolist())
+
+
+class Topology:
+    """Per-mesh numpy tables: face adjacency, corner angles, vertex angle sums,
+    boundary vertices and the weighted edge graph (for Dijkstra).
+
+    **Arguments:**
+
+    - `mesh`: a concrete `Mesh` (not a tracer).
+    """
+
+    def __init__(self, mesh: Mesh):
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        f = np.asarray(mesh.faces, dtype=np.int64)
+        edges = np.asarray(mesh.edges, dtype=np.int64)
+        edge_faces = np.asarray(mesh.edge_faces, dtype=np.int64)
+        face_edges = np.asarray(mesh.face_edges, dtype=np.int64)
+        self.vertices, self.faces, self.edges = v, f, edges
+        self.face_edges = face_edges
+        across = edge_faces[face_edges]  # (F, 3, 2)
+        me = np.arange(f.shape[0])[:, None]
+        #: adj[f, i]: the face across the edge opposite corner i (-1: boundary)
+        self.adj = np.where(across[..., 0] == me, across[..., 1], across[..., 0])
+        p = v[f]
+        angles = np.empty(f.shape, dtype=np.float64)
+        for i in range(3):
+            a = p[:, (i + 1) % 3] - p[:, i]
+            b = p[:, (i + 2) % 3] - p[:, i]
+            angles[:, i] = np.arctan2(
+                np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1)
+            )
+        self.corner_angle = angles
+        self.angle_sum = np.bincount(f.ravel(), angles.ravel(), minlength=v.shape[0])
+        self.boundary_vertex = np.zeros(v.shape[0], dtype=bool)
+        self.boundary_vertex[edges[edge_faces[:, 1] < 0].ravel()] = True
+        self.max_valence = int(np.bincount(f.ravel()).max())
+        self.vertex_faces = np.asarray(mesh.vertex_faces, dtype=np.int64)
+        self.mean_edge_length = float(np.asarray(mesh.mean_edge_length))
+        lengths = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+        self._graph = (
+            np.concatenate([edges[:, 0], edges[:, 1]]),
+            np.concatenate([edges[:, 1], edges[:, 0]]),
+            np.concatenate([lengths, lengths]),
+        )
+
+    # ------------------------------------------------------------------ fans
+
+    def corner(self, face: int, vertex: int) -> int:
+        """The corner (0, 1, 2) of `face` at `vertex`, or -1."""
+        hit = np.flatnonzero(self.faces[face] == vertex)
+        return int(hit[0]) if hit.size else -1
+
+    def rotate(self, face: int, vertex: int, ccw: bool) -> int:
+        """The next face around `vertex` from `face`, counter-clockwise (seen from
+        the side the faces' orientation points to) or clockwise; -1 at a boundary."""
+        c = self.corner(face, vertex)
+        return int(self.adj[face, (c + 1) % 3 if ccw else (c + 2) % 3])
+
+    def fan(self, vertex: int, first: int, last: int, ccw: bool) -> list[int] | None:
+        """Faces around `vertex` from `first` to `last` (both included) turning one
+        way, or None when that way crosses the boundary."""
+        out = [first]
+        face = first
+        while face != last:
+            face = self.rotate(face, vertex, ccw)
+            if face < 0 or len(out) > self.max_valence:
+                return None
+            out.append(face)
+        return out
+
+    def edge_face(self, vertex: int, other: int, after: bool, ccw: bool) -> int:
+        """The face of edge (vertex, other) lying just after (or before) the edge
+        when turning around `vertex` in the given sense; -1 if none."""
+        for f in self._edge_faces(vertex, other):
+            c = self.corner(f, vertex)
+            # in a counter-clockwise face (v, a, b), turning ccw around v goes
+            # edge (v, a) -> face -> edge (v, b)
+            a, b = self.faces[f, (c + 1) % 3], self.faces[f, (c + 2) % 3]
+            first_edge_end = a if ccw else b
+            if (first_edge_end == other) == after:
+                return int(f)
+        return -1
+
+    def _edge_faces(self, a: int, b: int) -> list[int]:
+        around = self.vertex_faces[a]
+        around = around[around >= 0]
+        return around[(self.faces[around] == b).any(1)].tolist()
+
+    # ------------------------------------------------------------ Dijkstra
+
+    def vertex_path(self, start: EndPoint, end: EndPoint) -> list[int]:
+        """Shortest path on the edge graph, from the start point to the end point.
+
+        A point that is not a vertex becomes an extra node joined to the corners of
+        its face (node `V` for the start, `V + 1` for the end).
+        """
+        n = self.vertices.shape[0]
+        rows, cols, data = (list(x) for x in ([], [], []))
+        nodes = []
+        for k, p in enumerate((start, end)):
+            if p.vertex >= 0:
+                nodes.append(p.vertex)
+                continue
+            node = n + k
+            nodes.append(node)
+            for c in self.faces[p.face]:
+                d = float(np.linalg.norm(self.vertices[c] - p.xyz))
+                rows += [node, int(c)]
+                cols += [int(c), node]
+                data += [d, d]
+        if nodes[0] >= n and nodes[1] >= n and start.face == end.face:
+            d = float(np.linalg.norm(start.xyz - end.xyz))
+            rows += [nodes[0], nodes[1]]
+            cols += [nodes[1], nodes[0]]
+            data += [d, d]
+        r0, c0, d0 = self._graph
+        graph = sp.csr_matrix(
+            (
+                np.concatenate([d0, data]),
+                (np.concatenate([r0, rows]), np.concatenate([c0, cols])),
+            ),
+            shape=(n + 2, n + 2),
+        )
+        if nodes[0] == nodes[1]:
+            return [nodes[0]]
+        _, pred = dijkstra(
+            graph, indices=nodes[0], return_predecessors=True, min_only=False
+        )
+        path = [nodes[1]]
+        while path[-1] != nodes[0]:
+            prev = int(pred[path[-1]])
+            if prev < 0:
+                raise JaxgeoError(
+                    "the start and end points lie on different connected components"
+                )
+            path.append(prev)
+        return path[::-1]
+
+    def vertex_path_corridor(
+        self, path: Sequence[int], start: EndPoint, end: EndPoint
+    ) -> list[int]:
+        """A face corridor along a vertex path (as from `vertex_path`).
+
+        Around every interior vertex of the path the corridor takes the fan of faces
+        between the incoming and the outgoing edge on the side of the smaller angle
+        (the side a straightened path can cut across).
+        """
+        n = self.vertices.shape[0]
+        m = len(path) - 1
+        if m == 0:
+            return [start.face] if start.vertex < 0 else [end.face]
+        if m == 1:
+            if path[0] >= n:
+                return [start.face]
+            if path[1] >= n:
+                return [end.face]
+            return self._edge_faces(path[0], path[1])[:1]
+        out: list[int] = []
+        for t in range(1, m):
+            v = path[t]
+            best, best_angle = None, np.inf
+            for ccw in (True, False):
+                if path[t - 1] >= n:
+                    first = start.face
+                else:
+                    first = self.edge_face(v, path[t - 1], after=True, ccw=ccw)
+                if path[t + 1] >= n:
+                    last = end.face
+                else:
+                    last = self.edge_face(v, path[t + 1], after=False, ccw=ccw)
+                if first < 0 or last < 0:
+                    continue
+                fan = self.fan(v, first, last, ccw)
+                if fan is None:
+                    continue
+                angle = sum(self.corner_angle[f, self.corner(f, v)] for f in fan)
+                if angle < best_angle:
+                    best, best_angle = fan, angle
+            if best is None:
+                raise JaxgeoError(f"no fan of faces around vertex {v} joins the path")
+            out += best
+        return out
+
+
+_CACHE: dict[int, tuple[weakref.ref, Topology]] = {}
+
+
+def topology(mesh: Mesh) -> Topology:
+    """The `Topology` of a mesh, cached while the mesh object lives."""
+    key = id(mesh)
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0]() is mesh:
+        return hit[1]
+    for k in [k for k, (ref, _) in _CACHE.items() if ref() is None]:
+        del _CACHE[k]
+    topo = Topology(mesh)
+    _CACHE[key] = (weakref.ref(mesh), topo)
+    return topo
+
+
+def check_corridor(topo: Topology, corridor: Sequence[int]) -> np.ndarray:
+    """Validate a corridor: face ids in range, consecutive faces sharing an edge."""
+    c = np.asarray(corridor, dtype=np.int64).ravel()
+    if c.size == 0:
+        raise JaxgeoError("empty face corridor")
+    if c.min() < 0 or c.max() >= topo.faces.shape[0]:
+        raise JaxgeoError("face corridor holds out-of-range face ids")
+    if c.size > 1:
+        a, b = topo.faces[c[:-1]], topo.faces[c[1:]]
+        shared = (a[:, :, None] == b[:, None, :]).any(-1).sum(1)
+        bad = np.flatnonzero((shared != 2) & (c[:-1] != c[1:]))
+        if bad.size:
+            raise JaxgeoError(
+                f"faces {c[bad[0]]} and {c[bad[0] + 1]} of the corridor do not "
+                "share an edge"
+            )
+    return c
+
+
+def clean_corridor(
+    corridor: Sequence[int], start: EndPoint, end: EndPoint, topo: Topology
+) -> list[int]:
+    """Drop repeated faces (a, a -> a), back-tracks (a, b, a -> a) and the faces at
+    either end that the path need not cross (while the next face also holds the
+    end point)."""
+    stack: list[int] = []
+    for f in corridor:
+        f = int(f)
+        if stack and stack[-1] == f:
+            continue
+        if len(stack) >= 2 and stack[-2] == f:
+            stack.pop()
+            continue
+        stack.append(f)
+    lo, hi = 0, len(stack) - 1
+    while lo < hi and start.in_face(topo, stack[lo + 1]):
+        lo += 1
+    while hi > lo and end.in_face(topo, stack[hi - 1]):
+        hi -= 1
+    return stack[lo : hi + 1]
