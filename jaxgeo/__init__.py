@@ -1,6 +1,7 @@
 """jaxgeo: differentiable geodesics on triangle meshes, in JAX."""
 
 from ._errors import JaxgeoError as JaxgeoError
+from .batch import shortest_paths as shortest_paths
 from .geodesic import path_length as path_length, shortest_path as shortest_path
 from .locate import SurfacePoint as SurfacePoint, locate as locate
 from .mesh import Mesh as Mesh, load_mesh as load_mesh

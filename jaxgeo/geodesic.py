@@ -19,6 +19,8 @@ from .replay import replay
 from .trace import TraceOptions, trace
 
 Method = Literal["laser"]
+#: The methods `shortest_path` accepts.
+METHODS: tuple[str, ...] = ("laser",)
 Endpoint = ArrayLike | SurfacePoint
 
 
@@ -50,6 +52,11 @@ def _check_point(name: str, p, mesh: Mesh) -> None:
         raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
     if not np.isfinite(a).all():
         raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")
+
+
+def _validate_options(method: str) -> None:
+    if method not in METHODS:
+        raise JaxgeoError(f"unknown method {method!r}; expected one of {METHODS}")
 
 
 def _as_surface_point(mesh: Mesh, p: Endpoint):
@@ -121,8 +128,7 @@ def shortest_path(
     """
     if not isinstance(mesh, Mesh):
         raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
-    if method != "laser":
-        raise JaxgeoError(f"unknown method {method!r}; expected 'laser'")
+    _validate_options(method)
     concrete = _is_concrete(mesh, p1, p2)
     if concrete:
         _check_point("p1", p1, mesh)

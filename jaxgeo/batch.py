@@ -1,0 +1,132 @@
+"""Many geodesics at once: `shortest_paths`, chunked, vmapped and sharded.
+
+A batch of endpoint pairs is cut into chunks of a fixed size (the last one padded),
+so every chunk has the same shape and the solver compiles once. Each chunk runs as
+one `jax.vmap` of the single-path solver. With several devices, each chunk's batch
+axis is split across them with `jax.sharding` (the mesh is replicated); the chunk
+size is rounded up to a multiple of the device count.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
+from jaxtyping import ArrayLike
+
+from ._errors import JaxgeoError
+from .geodesic import _solve, _validate_options
+from .locate import DEFAULT_MAX_DISTANCE
+from .mesh import Mesh
+from .normals import Weighting
+from .path import Path, Status
+from .trace import TraceOptions
+
+
+def _check_batch(name: str, p: ArrayLike) -> np.ndarray:
+    a = np.asarray(p)
+    if a.dtype.kind not in "fiu":
+        raise JaxgeoError(f"{name} must be real 3-D points, got dtype {a.dtype}")
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise JaxgeoError(f"{name} must have shape (N, 3), got {a.shape}")
+    bad = ~np.isfinite(a).all(axis=1)
+    if bad.any():
+        raise JaxgeoError(
+            f"{name} has NaN or infinite coordinates in rows {np.flatnonzero(bad)[:10]}"
+        )
+    return a
+
+
+@eqx.filter_jit
+def _solve_chunk(mesh, p1, p2, max_distance, weighting, options):
+    def one(a, b):
+        return _solve(mesh, a, b, max_distance, weighting, options)[0]
+
+    return jax.vmap(one)(p1, p2)
+
+
+def _device_sharding() -> NamedSharding | None:
+    devices = jax.devices()
+    if len(devices) < 2:
+        return None
+    grid = jax.sharding.Mesh(np.asarray(devices), ("batch",))
+    return NamedSharding(grid, PartitionSpec("batch"))
+
+
+def shortest_paths(
+    mesh: Mesh,
+    p1: ArrayLike,
+    p2: ArrayLike,
+    *,
+    method: Literal["laser"] = "laser",
+    candidates: Literal["local", "all"] = "local",
+    max_points: int = 1024,
+    normals: Weighting = "uniform",
+    max_distance: float = DEFAULT_MAX_DISTANCE,
+    chunk_size: int = 256,
+    shard: bool = True,
+    throw: bool = True,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
+    """Geodesics between the rows of `p1` and `p2` (each `(N, 3)`).
+
+    **Arguments:** as `shortest_path`, and
+
+    - `chunk_size`: pairs solved per compiled call (bounds memory: about
+      `chunk_size · max_points` path entries at a time). Repeated calls with the
+      same `chunk_size` and options do not recompile, whatever N is.
+    - `shard`: split each chunk across all devices (`jax.devices()`) when there are
+      several.
+    - `throw`: raise `JaxgeoError` naming the failed rows if any path is not
+      complete; otherwise check `paths.status`.
+    - `progress`: called as `progress(done, total)` after each chunk.
+
+    **Returns:** a `Path` whose arrays have a leading batch axis of length N.
+    """
+    if not isinstance(mesh, Mesh):
+        raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
+    _validate_options(method)
+    a, b = _check_batch("p1", p1), _check_batch("p2", p2)
+    if a.shape != b.shape:
+        raise JaxgeoError(
+            f"p1 and p2 must have the same shape, got {a.shape} and {b.shape}"
+        )
+    if chunk_size < 1:
+        raise JaxgeoError(f"chunk_size must be positive, got {chunk_size}")
+    n = a.shape[0]
+    if n == 0:
+        raise JaxgeoError("empty batch: p1 and p2 have no rows")
+    sharding = _device_sharding() if shard else None
+    if sharding is not None:
+        n_dev = sharding.mesh.size
+        chunk_size = -(-chunk_size // n_dev) * n_dev
+    options = TraceOptions(candidates=candidates, max_points=max_points)
+    dtype = mesh.vertices.dtype
+    pieces = []
+    for start in range(0, n, chunk_size):
+        stop = min(start + chunk_size, n)
+        idx = np.minimum(np.arange(start, start + chunk_size), n - 1)  # pad with last
+        ca, cb = jnp.asarray(a[idx], dtype), jnp.asarray(b[idx], dtype)
+        if sharding is not None:
+            ca, cb = jax.device_put(ca, sharding), jax.device_put(cb, sharding)
+        paths = _solve_chunk(mesh, ca, cb, max_distance, normals, options)
+        pieces.append(jax.tree.map(lambda x, k=stop - start: np.asarray(x)[:k], paths))
+        if progress is not None:
+            progress(stop, n)
+    out = jax.tree.map(lambda *xs: np.concatenate(xs), *pieces)
+    if throw:
+        failed = np.flatnonzero(out.status != Status.SUCCESS)
+        if failed.size:
+            codes = sorted({Status(int(s)).name for s in out.status[failed]})
+            raise JaxgeoError(
+                f"{failed.size} of {n} paths failed ({', '.join(codes)}) at rows "
+                f"{failed[:10].tolist()}"
+                + (" …" if failed.size > 10 else "")
+                + f"; first: {Status(int(out.status[failed[0]])).message}"
+            )
+    return out

@@ -1,0 +1,100 @@
+"""Batches of paths: chunked vmap equals single calls, no recompilation for new
+batch sizes, sharding across (forced) host devices equals the unsharded result."""
+
+import logging
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import numpy as np
+import pytest
+
+import jaxgeo as jg
+
+from .helpers import unit_icosphere
+
+MESH = unit_icosphere(2)
+
+
+def _pairs(n, seed):
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(2, n, 3))
+    return p / np.linalg.norm(p, axis=-1, keepdims=True)
+
+
+def test_batch_equals_single_paths():
+    p1, p2 = _pairs(7, 0)
+    paths = jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128)
+    assert paths.points.shape == (7, 128, 3)
+    for i in range(7):
+        single = jg.shortest_path(MESH, p1[i], p2[i], max_points=128)
+        assert int(single.count) == int(paths.count[i])
+        np.testing.assert_allclose(paths.length[i], float(single.length), rtol=1e-12)
+
+
+def test_new_batch_sizes_do_not_recompile(caplog):
+    p1, p2 = _pairs(9, 1)
+    jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128)  # compiles
+    with jax.log_compiles(True), caplog.at_level(logging.WARNING):
+        caplog.clear()
+        jg.shortest_paths(MESH, p1[:5], p2[:5], chunk_size=4, max_points=128)
+        jg.shortest_paths(MESH, p1[:3], p2[:3], chunk_size=4, max_points=128)
+    compiles = [r for r in caplog.records if "Compiling" in r.getMessage()]
+    assert not compiles, [r.getMessage()[:120] for r in compiles]
+
+
+def test_bad_batches_raise():
+    p1, p2 = _pairs(3, 2)
+    with pytest.raises(jg.JaxgeoError, match="same shape"):
+        jg.shortest_paths(MESH, p1, p2[:2])
+    with pytest.raises(jg.JaxgeoError, match=r"shape \(N, 3\)"):
+        jg.shortest_paths(MESH, p1[:, :2], p2[:, :2])
+    bad = p1.copy()
+    bad[1, 0] = np.nan
+    with pytest.raises(jg.JaxgeoError, match="NaN"):
+        jg.shortest_paths(MESH, bad, p2)
+    far = p1 * 3
+    with pytest.raises(
+        jg.JaxgeoError, match=r"3 of 3 paths failed \(FAR_FROM_SURFACE\)"
+    ):
+        jg.shortest_paths(MESH, far, p2, chunk_size=4, max_points=128)
+    out = jg.shortest_paths(MESH, far, p2, chunk_size=4, max_points=128, throw=False)
+    assert np.all(out.status == jg.Status.FAR_FROM_SURFACE)
+
+
+SHARDED = textwrap.dedent(
+    """
+    import jax, numpy as np
+    jax.config.update("jax_enable_x64", True)
+    assert jax.device_count() == 4, jax.devices()
+    import jaxgeo as jg
+    from tests.helpers import unit_icosphere
+    mesh = unit_icosphere(2)
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(2, 10, 3))
+    p /= np.linalg.norm(p, axis=-1, keepdims=True)
+    a = jg.shortest_paths(mesh, p[0], p[1], chunk_size=4, max_points=128)
+    b = jg.shortest_paths(mesh, p[0], p[1], chunk_size=4, max_points=128, shard=False)
+    np.testing.assert_array_equal(a.count, b.count)
+    np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-14)
+    print("sharded ok")
+    """
+)
+
+
+def test_sharded_batch_equals_unsharded():
+    """Four forced host devices (the flag must be set before JAX starts, hence a
+    subprocess); the batch axis is split across them."""
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = subprocess.run(
+        [sys.executable, "-c", SHARDED],
+        env=env,
+        cwd=root,
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "sharded ok" in out.stdout
