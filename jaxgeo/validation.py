@@ -28,7 +28,13 @@ which `scipy.integrate.quad` integrates to near machine precision.
 
 from __future__ import annotations
 
+import csv
 import math
+import os
+import sys
+import time
+import typing
+from dataclasses import dataclass, field
 from functools import cache
 from typing import NamedTuple
 
@@ -381,3 +387,750 @@ def _catenoid_geodesic_length_shooting(
     if sol.x[1] <= 0.0 or np.max(np.abs(residual(sol.x))) > 1e-10:
         raise JaxgeoError(f"shooting did not converge: {sol.message}")
     return float(sol.x[1]), float(sol.x[0])
+
+
+# --------------------------------------------------------------------------- curves
+
+
+def great_circle_points(
+    p: Float[ArrayLike, "3"], q: Float[ArrayLike, "3"], n: int = 100
+) -> Float[np.ndarray, "n 3"]:
+    """`n` points of the shorter great-circle arc from p to q (on the sphere through
+    p, centred at the origin; slerp of the directions)."""
+    p = np.asarray(p, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    radius = float(np.linalg.norm(p))
+    angle = float(great_circle_length(p, q))
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    if angle == 0.0:
+        return np.repeat(p[None], n, axis=0)
+    u, v = p / radius, q / np.linalg.norm(q)
+    return (
+        radius
+        * (np.sin((1.0 - t) * angle) * u + np.sin(t * angle) * v)
+        / math.sin(angle)
+    )
+
+
+def catenoid_geodesic_points(
+    p: ArrayLike, q: ArrayLike, n: int = 100, c: float | None = None
+) -> Float[np.ndarray, "n 3"]:
+    """`n` points, equally spaced in arc length, of the shortest catenoid geodesic
+    from p to q (given as (x, y, z) or (θ, z)).
+
+    The travel is taken from `catenoid_geodesics`; the initial direction comes from
+    shooting the geodesic ODE onto q, and the curve is the ODE's solution sampled at
+    `n` arc lengths.
+    """
+    c = _default_c() if c is None else float(c)
+    best = catenoid_geodesics(p, q, c)[0]
+    th1, z1 = _theta_z(p)
+    if best.kind == "meridian" or best.length == 0.0:
+        z = np.linspace(z1, _theta_z(q)[1], n)
+        th = np.full(n, th1)
+    elif best.kind == "neck":
+        th = th1 + np.linspace(0.0, best.travel, n)
+        z = np.zeros(n)
+    else:
+        length, beta = _catenoid_geodesic_length_shooting(p, q, c, travel=best.travel)
+        ch = math.cosh(z1 / c)
+        y0 = [th1, z1, math.sin(beta) / (c * ch), math.cos(beta) / ch]
+
+        def rhs(s, y):
+            _, zz, dth, dz = y
+            tz = math.tanh(zz / c)
+            return [dth, dz, -2.0 * tz / c * dth * dz, c * tz * dth**2 - tz / c * dz**2]
+
+        sol = scipy.integrate.solve_ivp(
+            rhs,
+            (0.0, length),
+            y0,
+            method="DOP853",
+            rtol=1e-12,
+            atol=1e-12,
+            t_eval=np.linspace(0.0, length, n),
+        )
+        th, z = sol.y[0], sol.y[1]
+    r = c * np.cosh(z / c)
+    return np.stack([r * np.cos(th), r * np.sin(th), z], axis=-1)
+
+
+def catenoid_descent_curve(
+    p: ArrayLike, q: ArrayLike, n: int = 100, c: float | None = None
+) -> tuple[float, Float[np.ndarray, "n 3"]]:
+    """The continuous limit of the sliding laser ray on the catenoid: the curve of
+    steepest descent of the Euclidean distance to q, from p.
+
+    At a point x of the surface, the laser ray's chord from x to q projects onto
+    the surface with initial direction P_T(q − x), the tangential part of q − x,
+    which is −∇_S ½|x − q|²: as the mesh is refined, the traced path tends to the
+    integral curve of that field, not to the geodesic. On a sphere the two
+    coincide (|x − q| is a function of the great-circle distance); on the catenoid
+    they do not, and the difference in length is the method's intrinsic error.
+
+    Integrated in arc length in (θ, z) (solve_ivp, DOP853, rtol 1e-11) until
+    |x − q| < 1e-7. **Returns:** (length, `n` points equally spaced in arc length).
+    """
+    c = _default_c() if c is None else float(c)
+    th1, z1 = _theta_z(p)
+    th2, z2 = _theta_z(q)
+
+    def xyz(th: float, z: float) -> np.ndarray:
+        r = c * math.cosh(z / c)
+        return np.array([r * math.cos(th), r * math.sin(th), z])
+
+    target = xyz(th2, z2)
+
+    def rhs(s, y):
+        th, z = y
+        r, rp = c * math.cosh(z / c), math.sinh(z / c)
+        d = target - xyz(th, z)
+        # components of P_T(d) in the coordinate basis: (d·X_θ)/E, (d·X_z)/G
+        a = (d[1] * math.cos(th) - d[0] * math.sin(th)) / r
+        b = (rp * (d[0] * math.cos(th) + d[1] * math.sin(th)) + d[2]) / (1 + rp * rp)
+        speed = math.sqrt(r * r * a * a + (1 + rp * rp) * b * b)
+        return [a / speed, b / speed]
+
+    def arrived(s, y):
+        return np.linalg.norm(xyz(*y) - target) - 1e-7
+
+    arrived.terminal = True
+    bound = 10.0 * (np.linalg.norm(xyz(th1, z1) - target) + 1.0)
+    sol = scipy.integrate.solve_ivp(
+        rhs,
+        (0.0, bound),
+        [th1, z1],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-12,
+        events=arrived,
+        dense_output=True,
+    )
+    if sol.status != 1:
+        raise JaxgeoError("the steepest-descent curve did not reach q")
+    length = float(sol.t[-1])
+    th, z = sol.sol(np.linspace(0.0, length, n))
+    r = c * np.cosh(z / c)
+    return length, np.stack([r * np.cos(th), r * np.sin(th), z], axis=-1)
+
+
+# --------------------------------------------------------------------------- suites
+
+
+class Pair(NamedTuple):
+    """An endpoint pair of a validation suite: two mesh vertices on the analytic
+    surface, so `analytic` is the exact length between them."""
+
+    pair: str
+    kind: str
+    v1: int
+    v2: int
+    analytic: float
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A mesh of an analytic surface and its endpoint pairs.
+
+    `resolution` is the refinement level (see `sphere_suite`, `catenoid_suite`);
+    `mesh_size` the mean edge length.
+    """
+
+    name: str
+    resolution: int
+    vertices: np.ndarray
+    faces: np.ndarray
+    pairs: tuple[Pair, ...]
+
+    @property
+    def mesh_size(self) -> float:
+        e = self.vertices[self.faces] - self.vertices[np.roll(self.faces, 1, axis=1)]
+        return float(np.linalg.norm(e, axis=-1).mean())
+
+
+#: Target arc angles (degrees) of the sphere pairs; 90° is the paper's Fig. 8 arc
+#: (a quarter of a great circle on the hemisphere).
+SPHERE_ANGLES = (10.0, 20.0, 30.0, 45.0, 60.0, 90.0, 120.0, 160.0)
+#: Subdivision level whose vertices are the sphere pairs' endpoints (every finer
+#: icosphere contains them), so the pairs are identical at every resolution ≥ 3.
+_SPHERE_BASE_LEVEL = 3
+
+#: Catenoid pairs: (id, kind, (θ₁°, z₁), (θ₂°, z₂)). Rings of radius 1 at z = ±0.5.
+#: C3 is the paper's arc ABC (1.0876: ring to ring, Δθ ≈ 15.8°), C7 its arc BE
+#: (1.332569 = a quarter of the neck circle, c·π/2).
+CATENOID_PAIRS = (
+    ("C1", "meridian, ring to ring", (0.0, -0.5), (0.0, 0.5)),
+    ("C2", "meridian", (30.0, -0.25), (30.0, 0.5)),
+    ("C3", "across neck 15° (paper's ABC)", (0.0, -0.5), (15.0, 0.5)),
+    ("C4", "across neck 60°", (0.0, -0.5), (60.0, 0.5)),
+    ("C5", "across neck 120°", (0.0, -0.5), (120.0, 0.5)),
+    ("C6", "across neck 90°", (0.0, -0.25), (90.0, 0.25)),
+    ("C7", "neck circle 90° (paper's BE)", (0.0, 0.0), (90.0, 0.0)),
+    ("C8", "neck to ring 60°", (0.0, 0.0), (60.0, 0.5)),
+    ("C9", "turning point 90°", (0.0, 0.5), (90.0, 0.5)),
+    ("C10", "turning point 150°", (0.0, 0.5), (150.0, 0.5)),
+    ("C11", "turning point 60°", (0.0, 0.25), (60.0, 0.25)),
+    ("C12", "turning point 120°, below", (0.0, -0.5), (120.0, -0.25)),
+    ("C13", "across neck 165°", (0.0, -0.5), (165.0, 0.5)),
+)
+
+
+def _check_resolution(resolution: int, minimum: int) -> int:
+    if int(resolution) != resolution or resolution < minimum:
+        raise JaxgeoError(
+            f"resolution must be an integer >= {minimum}, got {resolution}"
+        )
+    return int(resolution)
+
+
+def _nearest_vertex(vertices: np.ndarray, x: np.ndarray) -> int:
+    d = np.linalg.norm(vertices - x, axis=1)
+    i = int(np.argmin(d))
+    if d[i] > 1e-9:
+        raise JaxgeoError(f"no mesh vertex at {x} (nearest {d[i]:.3g} away)")
+    return i
+
+
+@cache
+def _sphere_pair_points() -> tuple[tuple[float, np.ndarray, np.ndarray], ...]:
+    """(target angle, p, q) for `SPHERE_ANGLES`, p and q vertices of the level-3
+    icosphere. Start vertices are spread over the sphere (the vertices nearest to a
+    Fibonacci lattice of directions); each end vertex is the one whose arc angle from
+    its start is nearest to the target (ties to the lower index)."""
+    from .surfaces import icosphere
+
+    v, _ = icosphere(_SPHERE_BASE_LEVEL)
+    n = len(SPHERE_ANGLES)
+    golden = math.pi * (3.0 - math.sqrt(5.0))
+    out = []
+    for k, target in enumerate(SPHERE_ANGLES):
+        zk = 1.0 - 2.0 * (k + 0.5) / n
+        rk = math.sqrt(1.0 - zk * zk)
+        d = np.array([rk * math.cos(golden * k), rk * math.sin(golden * k), zk])
+        i = int(np.argmax(v @ d))
+        ang = np.degrees(great_circle_length(v[i], v))
+        j = int(np.argmin(np.abs(ang - target)))
+        out.append((target, v[i], v[j]))
+    return tuple(out)
+
+
+def sphere_suite(resolution: int = 4) -> Suite:
+    """Unit icosphere with `resolution` subdivisions (20·4**resolution faces; at
+    least 3) and 8 vertex pairs at about 10°–160° of arc (`SPHERE_ANGLES`), the same
+    points at every resolution. Analytic length: the great circle."""
+    from .surfaces import icosphere
+
+    resolution = _check_resolution(resolution, _SPHERE_BASE_LEVEL)
+    v, f = icosphere(resolution)
+    pairs = []
+    for k, (_, p, q) in enumerate(_sphere_pair_points()):
+        i, j = _nearest_vertex(v, p), _nearest_vertex(v, q)
+        length = float(great_circle_length(v[i], v[j]))
+        kind = f"great circle {math.degrees(length):.0f}°"
+        if k == SPHERE_ANGLES.index(90.0):
+            kind += " (Fig. 8)"
+        pairs.append(Pair(f"S{k + 1}", kind, i, j, length))
+    return Suite("sphere", resolution, v, f, tuple(pairs))
+
+
+def catenoid_mesh(resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """The catenoid (rings of radius 1 at distance 1) at a refinement level:
+    `6·2**resolution` vertices around, `2**(resolution + 1)` bands in height
+    (3 → 48 × 16, 1536 faces; 4 → 96 × 32, 6144 faces), mean edge length close
+    to that of the icosphere of the same level."""
+    from .surfaces import catenoid
+
+    return catenoid(n_around=6 * 2**resolution, n_height=2 ** (resolution + 1))
+
+
+def catenoid_suite(resolution: int = 4) -> Suite:
+    """The catenoid of `catenoid_mesh(resolution)` (at least 2) and the 13 vertex
+    pairs of `CATENOID_PAIRS` (θ multiples of 15°, z ∈ {0, ±0.25, ±0.5}: mesh
+    vertices at every level ≥ 2). Analytic length: `catenoid_geodesic_length`."""
+    resolution = _check_resolution(resolution, 2)
+    v, f = catenoid_mesh(resolution)
+    c = _default_c()
+    pairs = []
+    for pid, kind, a, b in CATENOID_PAIRS:
+        idx = []
+        for deg, z in (a, b):
+            th = math.radians(deg)
+            r = c * math.cosh(z / c)
+            idx.append(
+                _nearest_vertex(v, np.array([r * math.cos(th), r * math.sin(th), z]))
+            )
+        length = catenoid_geodesic_length(v[idx[0]], v[idx[1]], c)
+        pairs.append(Pair(pid, kind, idx[0], idx[1], length))
+    return Suite("catenoid", resolution, v, f, tuple(pairs))
+
+
+SUITES = {"sphere": sphere_suite, "catenoid": catenoid_suite}
+
+
+# --------------------------------------------------------------------------- comparison
+
+
+def available_methods() -> tuple[str, ...]:
+    """The methods `jaxgeo.shortest_path` accepts: `jaxgeo.geodesic.METHODS` if it
+    exists, else the arguments of its `Method` literal type, else ("laser",)."""
+    from . import geodesic
+
+    methods = getattr(geodesic, "METHODS", None)
+    if methods is None:
+        methods = typing.get_args(getattr(geodesic, "Method", None)) or ("laser",)
+    return tuple(str(m) for m in methods)
+
+
+def _pygeodesic(vertices: np.ndarray, faces: np.ndarray):
+    import pygeodesic.geodesic as pyg
+
+    alg = pyg.PyGeodesicAlgorithmExact(
+        np.ascontiguousarray(vertices, np.float64),
+        np.ascontiguousarray(faces, np.int32),
+    )
+    return lambda i, j: float(alg.geodesicDistance(i, j)[0])
+
+
+def _potpourri3d(vertices: np.ndarray, faces: np.ndarray):
+    import potpourri3d as pp3d
+
+    flip = pp3d.EdgeFlipGeodesicSolver(vertices, faces)
+
+    def dist(i: int, j: int) -> float:
+        pts = flip.find_geodesic_path(i, j)
+        return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+
+    return dist
+
+
+#: Exact polyhedral solvers, in order of preference: pygeodesic's exact MMP
+#: algorithm, then potpourri3d's edge-flip geodesics (started from a Dijkstra path:
+#: locally shortest, in practice the shortest on these surfaces).
+EXACT_SOLVERS = {"pygeodesic": _pygeodesic, "potpourri3d": _potpourri3d}
+
+
+def _exact_solver(name: str, vertices: np.ndarray, faces: np.ndarray):
+    """(solver name, function (i, j) → exact polyhedral distance between vertices),
+    or (None, None). `name`: a key of `EXACT_SOLVERS`, "auto" (the first one
+    installed) or "none"."""
+    if name == "none":
+        return None, None
+    if name != "auto" and name not in EXACT_SOLVERS:
+        raise JaxgeoError(
+            f"unknown exact solver {name!r}; expected auto, none or one of "
+            f"{list(EXACT_SOLVERS)}"
+        )
+    for solver in EXACT_SOLVERS if name == "auto" else [name]:
+        try:
+            return solver, EXACT_SOLVERS[solver](vertices, faces)
+        except ImportError:
+            continue
+    if name != "auto":
+        raise JaxgeoError(f"exact solver {name!r} is not installed")
+    return None, None
+
+
+@dataclass(frozen=True)
+class MethodResult:
+    """One solver run: `length`, `status` (a `jaxgeo.Status` name) and wall time in
+    seconds (after compilation)."""
+
+    length: float
+    status: str
+    time: float
+
+
+@dataclass(frozen=True)
+class Row:
+    """One endpoint pair of a suite, solved by every method.
+
+    Errors are relative to the analytic length L, and signed:
+    `error(m)` = (L_m − L)/L (total), `discretisation_error` = (L_exact − L)/L (the
+    mesh's own error: the shortest path ON the mesh vs the smooth surface),
+    `method_error(m)` = (L_m − L_exact)/L (the solver's error on that mesh). With the
+    common denominator L, total = method + discretisation exactly (to rounding).
+    """
+
+    suite: str
+    resolution: int
+    n_faces: int
+    mesh_size: float
+    pair: str
+    kind: str
+    v1: int
+    v2: int
+    analytic: float
+    exact: float | None
+    results: dict[str, MethodResult] = field(default_factory=dict)
+
+    def error(self, method: str) -> float:
+        r = self.results[method]
+        return (
+            (r.length - self.analytic) / self.analytic
+            if r.status == "SUCCESS"
+            else math.nan
+        )
+
+    def method_error(self, method: str) -> float:
+        r = self.results[method]
+        if self.exact is None or r.status != "SUCCESS":
+            return math.nan
+        return (r.length - self.exact) / self.analytic
+
+    @property
+    def discretisation_error(self) -> float:
+        return (
+            math.nan
+            if self.exact is None
+            else (self.exact - self.analytic) / self.analytic
+        )
+
+
+def _pct(x: float, digits: int = 3) -> str:
+    return "—" if x is None or math.isnan(x) else f"{100.0 * x:+.{digits}f} %"
+
+
+def _num(x: float | None, digits: int = 6) -> str:
+    return "—" if x is None or math.isnan(x) else f"{x:.{digits}f}"
+
+
+@dataclass
+class Table:
+    """Validation results: one `Row` per (suite, resolution, pair).
+
+    `methods`: the solver methods run; `exact_solver`: the name of the exact
+    polyhedral reference (None if none was installed); `compile_time[(suite,
+    resolution, method)]`: seconds of the first call (JIT compilation included).
+    """
+
+    rows: list[Row]
+    methods: tuple[str, ...]
+    exact_solver: str | None
+    compile_time: dict[tuple[str, int, str], float] = field(default_factory=dict)
+
+    def columns(self) -> dict[str, list]:
+        """The table as a dict of equal-length columns (raw numbers, errors as
+        relative fractions, NaN where not available)."""
+        cols: dict[str, list] = {
+            k: []
+            for k in (
+                "suite",
+                "resolution",
+                "n_faces",
+                "mesh_size",
+                "pair",
+                "kind",
+                "v1",
+                "v2",
+                "analytic",
+                "exact",
+                "discretisation_error",
+            )
+        }
+        for m in self.methods:
+            for k in ("length", "status", "error", "method_error", "time"):
+                cols[f"{m}_{k}"] = []
+        for r in self.rows:
+            for k in ("suite", "resolution", "n_faces", "mesh_size", "pair", "kind"):
+                cols[k].append(getattr(r, k))
+            cols["v1"].append(r.v1)
+            cols["v2"].append(r.v2)
+            cols["analytic"].append(r.analytic)
+            cols["exact"].append(math.nan if r.exact is None else r.exact)
+            cols["discretisation_error"].append(r.discretisation_error)
+            for m in self.methods:
+                res = r.results[m]
+                cols[f"{m}_length"].append(res.length)
+                cols[f"{m}_status"].append(res.status)
+                cols[f"{m}_error"].append(r.error(m))
+                cols[f"{m}_method_error"].append(r.method_error(m))
+                cols[f"{m}_time"].append(res.time)
+        return cols
+
+    def to_csv(self, file: str | os.PathLike | typing.TextIO) -> None:
+        """Write `columns()` as CSV (full precision)."""
+        cols = self.columns()
+        if not hasattr(file, "write"):
+            with open(file, "w", newline="") as f:
+                return self.to_csv(f)
+        w = csv.writer(file)
+        w.writerow(cols)
+        for row in zip(*cols.values()):
+            w.writerow([repr(x) if isinstance(x, float) else x for x in row])
+        return None
+
+    def to_markdown(self) -> str:
+        """The table in Markdown, errors in per cent, one section per suite and
+        resolution."""
+        exact_name = self.exact_solver or "not installed"
+        head = [
+            "pair",
+            "kind",
+            "analytic",
+            f"exact polyhedral ({exact_name})",
+            "discr. err",
+        ]
+        for m in self.methods:
+            head += [m, f"{m} err", f"{m} method err", f"{m} ms"]
+        out = []
+        for (suite, res), rows in _groups(self.rows).items():
+            r0 = rows[0]
+            out.append(
+                f"**{suite}**, resolution {res}: {r0.n_faces} faces, mean edge "
+                f"length {r0.mesh_size:.4f}\n"
+            )
+            out.append("| " + " | ".join(head) + " |")
+            out.append("|" + "|".join(["---"] * 2 + ["---:"] * (len(head) - 2)) + "|")
+            for r in rows:
+                cells = [r.pair, r.kind, _num(r.analytic), _num(r.exact)]
+                cells.append(_pct(r.discretisation_error))
+                for m in self.methods:
+                    res = r.results[m]
+                    length = _num(res.length)
+                    if res.status != "SUCCESS":
+                        length += f" ({res.status})"
+                    cells += [
+                        length,
+                        _pct(r.error(m)),
+                        _pct(r.method_error(m)),
+                        f"{1e3 * res.time:.0f}",
+                    ]
+                out.append("| " + " | ".join(cells) + " |")
+            out.append("")
+        return "\n".join(out)
+
+
+def _groups(rows: list[Row]) -> dict[tuple[str, int], list[Row]]:
+    groups: dict[tuple[str, int], list[Row]] = {}
+    for r in rows:
+        groups.setdefault((r.suite, r.resolution), []).append(r)
+    return groups
+
+
+def run_suite(
+    suite: Suite,
+    methods: typing.Sequence[str] | None = None,
+    exact_solver: str = "auto",
+    progress: typing.Callable[[str], None] | None = None,
+    **solver_options: typing.Any,
+) -> Table:
+    """Solve every pair of `suite` with every method and the exact polyhedral solver.
+
+    **Arguments:** `methods`: `jaxgeo.shortest_path` methods (default
+    `available_methods()`); `exact_solver`: see `_exact_solver`; `progress`: called
+    with one line of text per step; `solver_options`: passed to `shortest_path`.
+
+    **Returns:** a `Table`. Endpoints are mesh vertices (passed as 3-D points), so
+    the analytic length is exact for them. Each method is called once on the first
+    pair before timing, so `MethodResult.time` excludes JIT compilation (reported
+    in `Table.compile_time`). Failed traces are recorded with their status, not
+    raised.
+    """
+    from .geodesic import shortest_path
+    from .mesh import Mesh
+    from .path import Status
+
+    methods = tuple(available_methods() if methods is None else methods)
+    say = progress or (lambda _: None)
+    tag = f"[{suite.name} r{suite.resolution}]"
+    mesh = Mesh(suite.vertices, suite.faces)
+    mesh_size = float(mesh.mean_edge_length)
+    name, exact = _exact_solver(exact_solver, suite.vertices, suite.faces)
+    rows = []
+    t0 = time.perf_counter()
+    for p in suite.pairs:
+        d = exact(p.v1, p.v2) if exact else None
+        rows.append(
+            Row(
+                suite.name,
+                suite.resolution,
+                mesh.n_faces,
+                mesh_size,
+                p.pair,
+                p.kind,
+                p.v1,
+                p.v2,
+                p.analytic,
+                d,
+            )
+        )
+    if exact:
+        say(f"{tag} exact polyhedral ({name}): {time.perf_counter() - t0:.1f} s")
+    table = Table(rows, methods, name)
+    v = np.asarray(suite.vertices)
+    for m in methods:
+        say(f"{tag} {m}: compiling ({mesh.n_faces} faces)")
+        t0 = time.perf_counter()
+        first = suite.pairs[0]
+        path = shortest_path(
+            mesh, v[first.v1], v[first.v2], method=m, throw=False, **solver_options
+        )
+        float(path.length)
+        table.compile_time[(suite.name, suite.resolution, m)] = time.perf_counter() - t0
+        for k, (p, row) in enumerate(zip(suite.pairs, rows)):
+            t0 = time.perf_counter()
+            path = shortest_path(
+                mesh, v[p.v1], v[p.v2], method=m, throw=False, **solver_options
+            )
+            length = float(path.length)
+            dt = time.perf_counter() - t0
+            status = Status(int(path.status)).name
+            row.results[m] = MethodResult(length, status, dt)
+            say(
+                f"{tag} {m} {k + 1}/{len(suite.pairs)} {p.pair}: {length:.6f} "
+                f"({_pct(row.error(m))}, {status.lower()}, {dt:.2f} s)"
+            )
+    return table
+
+
+def _merge(tables: list[Table]) -> Table:
+    out = Table([], tables[0].methods, tables[0].exact_solver)
+    for t in tables:
+        out.rows += t.rows
+        out.compile_time.update(t.compile_time)
+    return out
+
+
+def validate(
+    resolutions: int | typing.Sequence[int] = 4,
+    suites: typing.Sequence[str] = ("sphere", "catenoid"),
+    methods: typing.Sequence[str] | None = None,
+    exact_solver: str = "auto",
+    progress: typing.Callable[[str], None] | None = None,
+    **solver_options: typing.Any,
+) -> Table:
+    """Run the named suites (`SUITES`) at one or several resolutions; see
+    `run_suite`. Several resolutions make a convergence study
+    (`convergence_summary`, `plot_convergence`)."""
+    if isinstance(resolutions, int):
+        resolutions = [resolutions]
+    tables = []
+    for res in resolutions:
+        for name in suites:
+            if name not in SUITES:
+                raise JaxgeoError(
+                    f"unknown suite {name!r}; expected one of {list(SUITES)}"
+                )
+            tables.append(
+                run_suite(
+                    SUITES[name](res), methods, exact_solver, progress, **solver_options
+                )
+            )
+    return _merge(tables)
+
+
+def convergence_summary(table: Table) -> list[dict[str, typing.Any]]:
+    """Per (suite, resolution): `n_faces`, `mesh_size` and the median absolute
+    relative errors: `exact` (discretisation error of the exact polyhedral
+    geodesic), and per method `m` (total error) and `m_method` (vs exact)."""
+    out = []
+    for (suite, res), rows in _groups(table.rows).items():
+        entry: dict[str, typing.Any] = {
+            "suite": suite,
+            "resolution": res,
+            "n_faces": rows[0].n_faces,
+            "mesh_size": rows[0].mesh_size,
+            "exact": _median_abs([r.discretisation_error for r in rows]),
+        }
+        for m in table.methods:
+            entry[m] = _median_abs([r.error(m) for r in rows])
+            entry[f"{m}_method"] = _median_abs([r.method_error(m) for r in rows])
+        out.append(entry)
+    return out
+
+
+def _median_abs(xs: list[float]) -> float:
+    a = np.abs(np.asarray(xs, dtype=np.float64))
+    a = a[np.isfinite(a)]
+    return float(np.median(a)) if a.size else math.nan
+
+
+def summary_markdown(
+    summary: list[dict[str, typing.Any]], methods: typing.Sequence[str]
+) -> str:
+    """`convergence_summary` as a Markdown table (median |error| in per cent)."""
+    head = ["suite", "resolution", "faces", "mean edge", "exact polyhedral"]
+    head += [f"{m} {k}" for m in methods for k in ("total", "method")]
+    lines = [
+        "| " + " | ".join(head) + " |",
+        "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|",
+    ]
+    for e in summary:
+        cells = [
+            e["suite"],
+            str(e["resolution"]),
+            str(e["n_faces"]),
+            f"{e['mesh_size']:.4f}",
+        ]
+        cells.append(_pct(e["exact"]).lstrip("+"))
+        for m in methods:
+            cells += [_pct(e[m]).lstrip("+"), _pct(e[f"{m}_method"]).lstrip("+")]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _loglog(ax, entries: list[dict[str, typing.Any]], key: str, **kw) -> None:
+    h = np.array([e["mesh_size"] for e in entries])
+    y = np.array([e[key] for e in entries], dtype=float)
+    ok = np.isfinite(y) & (y > 0)
+    if ok.any():
+        ax.loglog(h[ok], y[ok], marker="o", **kw)
+
+
+def plot_convergence(
+    summary: list[dict[str, typing.Any]],
+    methods: typing.Sequence[str],
+    file=None,
+    axes=None,
+):
+    """Log–log plot of the median |relative error| against the mean edge length,
+    one panel per suite: each method's total error (solid), its method error
+    (dashed) and the exact polyhedral reference (black). With `file`, saves a PNG
+    (Agg backend when pyplot is not yet in use). Returns the figure."""
+    import matplotlib
+
+    if axes is None and "matplotlib.pyplot" not in sys.modules:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    suites = list(dict.fromkeys(e["suite"] for e in summary))
+    if axes is None:
+        fig, axes = plt.subplots(
+            1, len(suites), figsize=(5.5 * len(suites), 4.2), squeeze=False
+        )
+        axes = axes[0]
+    else:
+        fig = axes[0].figure
+    for ax, suite in zip(axes, suites):
+        es = sorted(
+            (e for e in summary if e["suite"] == suite), key=lambda e: e["mesh_size"]
+        )
+        h = np.array([e["mesh_size"] for e in es])
+
+        _loglog(ax, es, "exact", color="k", label="exact polyhedral vs analytic")
+        for k, m in enumerate(methods):
+            color = f"C{k}"
+            _loglog(ax, es, m, color=color, label=f"{m} vs analytic")
+            _loglog(
+                ax,
+                es,
+                f"{m}_method",
+                color=color,
+                ls="--",
+                label=f"{m} vs exact polyhedral",
+            )
+        if len(h) > 1:
+            ref = np.array([e["exact"] for e in es], dtype=float)
+            if np.isfinite(ref[-1]) and ref[-1] > 0:
+                ax.loglog(
+                    h, ref[-1] * (h / h[-1]) ** 2, color="0.7", lw=0.8, label="O(h²)"
+                )
+        ax.set_title(suite)
+        ax.set_xlabel("mean edge length h")
+        ax.set_ylabel("median |relative length error|")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    if file is not None:
+        fig.savefig(file, dpi=120)
+    return fig
