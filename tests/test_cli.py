@@ -59,3 +59,22 @@ def test_far_point_is_a_clear_error(tmp_path, capsys):
     code = main(["path", str(file), "--from", "0", "0", "5", "--to", "0", "1", "0"])
     assert code == 2
     assert "too far from the surface" in capsys.readouterr().err
+
+
+def test_paths_batch_from_csv(tmp_path, capsys):
+    mesh = unit_icosphere(2)
+    file = tmp_path / "sphere.obj"
+    trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)).export(file)
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(5, 2, 3))
+    p /= np.linalg.norm(p, axis=-1, keepdims=True)
+    pairs = tmp_path / "pairs.csv"
+    np.savetxt(pairs, p.reshape(5, 6), delimiter=",", header="x1,y1,z1,x2,y2,z2")
+    out = tmp_path / "lengths.csv"
+    code = main(["paths", str(file), str(pairs), "-o", str(out), "--chunk-size", "4"])
+    assert code == 0
+    rows = out.read_text().splitlines()
+    assert rows[0] == "row,status,length,points" and len(rows) == 6
+    assert all(r.split(",")[1] == "success" for r in rows[1:])
+    err = capsys.readouterr().err
+    assert "5/5 paths" in err and "5 paths complete, 0 failed" in err
