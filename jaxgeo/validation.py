@@ -824,6 +824,7 @@ class Table:
                 "v2",
                 "analytic",
                 "exact",
+                "exact_solver",
                 "discretisation_error",
             )
         }
@@ -837,6 +838,9 @@ class Table:
             cols["v2"].append(r.v2)
             cols["analytic"].append(r.analytic)
             cols["exact"].append(math.nan if r.exact is None else r.exact)
+            cols["exact_solver"].append(
+                self.exact_solver if r.exact is not None else ""
+            )
             cols["discretisation_error"].append(r.discretisation_error)
             for m in self.methods:
                 res = r.results[m]
@@ -898,6 +902,49 @@ class Table:
                 out.append("| " + " | ".join(cells) + " |")
             out.append("")
         return "\n".join(out)
+
+
+def read_csv(file: str | os.PathLike) -> Table:
+    """A `Table` from a file written by `Table.to_csv` (`compile_time` is not
+    stored, so it comes back empty)."""
+    with open(file, newline="") as f:
+        records = list(csv.DictReader(f))
+    if not records:
+        raise JaxgeoError(f"{file}: no rows")
+    methods = tuple(k[: -len("_status")] for k in records[0] if k.endswith("_status"))
+
+    def num(x: str) -> float:
+        return float(x) if x else math.nan
+
+    rows = []
+    for rec in records:
+        exact = num(rec["exact"])
+        rows.append(
+            Row(
+                rec["suite"],
+                int(rec["resolution"]),
+                int(rec["n_faces"]),
+                num(rec["mesh_size"]),
+                rec["pair"],
+                rec["kind"],
+                int(rec["v1"]),
+                int(rec["v2"]),
+                num(rec["analytic"]),
+                None if math.isnan(exact) else exact,
+                {
+                    m: MethodResult(
+                        num(rec[f"{m}_length"]),
+                        rec[f"{m}_status"],
+                        num(rec[f"{m}_time"]),
+                    )
+                    for m in methods
+                },
+            )
+        )
+    names = {rec.get("exact_solver") or "" for rec in records} - {""}
+    if not any(r.exact is not None for r in rows):
+        return Table(rows, methods, None)
+    return Table(rows, methods, names.pop() if len(names) == 1 else "from file")
 
 
 def _groups(rows: list[Row]) -> dict[tuple[str, int], list[Row]]:

@@ -118,6 +118,9 @@ def test_markdown_and_csv(table, tmp_path):
         rows = list(csv.DictReader(f))
     assert len(rows) == len(table.rows)
     assert float(rows[0]["analytic"]) == table.rows[0].analytic
+    back = validation.read_csv(path)
+    assert back.methods == table.methods and back.exact_solver == table.exact_solver
+    assert back.rows == table.rows  # floats written with repr: exact round trip
 
 
 def test_convergence_summary_and_plot(table, tmp_path):
