@@ -18,7 +18,7 @@ from jaxtyping import Array, Float
 
 from .locate import SurfacePoint
 from .mesh import Mesh
-from .path import EDGE, VERTEX, Path, pad_tail, polyline_length
+from .path import EDGE, VERTEX, Path, Status, pad_tail, polyline_length
 from .projection import initial_guess, solve_crossing
 
 
@@ -41,19 +41,23 @@ def replay(
     verts, edges = mesh.vertices, mesh.edges
     p1, p2 = start.position(mesh), end.position(mesh)
     last = traced.count - 1
+    # Only a complete path ends at point 2; an incomplete one (MAX_STEPS,
+    # NO_CROSSING) ends at its last crossing, which is replayed like the others.
+    complete = traced.status == Status.SUCCESS
 
     def body(prev, slot):
         i, kind, element, u0 = slot
         edge = jnp.where(kind == EDGE, element, 0)
         e0, e1 = edges[edge, 0], edges[edge, 1]
         x1, x2, n1, n2 = verts[e0], verts[e1], normals[e0], normals[e1]
-        is_edge = (kind == EDGE) & (i < last)
+        is_end = (i == last) & complete
+        is_edge = (kind == EDGE) & (i <= last) & ~is_end
         y0 = jax.lax.stop_gradient(initial_guess(prev, p2, x1, x2, n1, n2, u0))
         y0 = jnp.where(jnp.isfinite(y0), y0, 0.0)
         y, _ = solve_crossing(prev, p2, x1, x2, n1, n2, y0, is_edge)
         crossing = x1 + y[0] * (x2 - x1)
         vertex = verts[jnp.where(kind == VERTEX, element, 0)]
-        point = jnp.where(i == last, p2, jnp.where(kind == VERTEX, vertex, crossing))
+        point = jnp.where(is_end, p2, jnp.where(kind == VERTEX, vertex, crossing))
         point = jnp.where(i <= last, point, prev)
         return point, (point, jnp.where(is_edge, y[0], traced.params[i]))
 
