@@ -32,6 +32,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._numerics import safe_norm
@@ -461,3 +462,255 @@ def _solve(
         valid_strip=strip.valid,
         iterations=jnp.asarray(it, jnp.int32),
     )
+
+
+# ----------------------------------------------------------------------- strip repair
+
+
+def _capacity(n: int) -> int:
+    """Buffer size for n interior nodes: a power of two (≥ 32), so that paths of
+    similar length share one compiled shape."""
+    return max(32, 1 << (n - 1).bit_length()) if n > 0 else 32
+
+
+def _fan(mesh_np: dict, v: int) -> tuple[list[int], list[int], bool]:
+    """Faces around vertex v in order, the edge between consecutive faces
+    (`edges[j]` joins `faces[j]` and `faces[j + 1]`, cyclically when closed), and
+    whether the fan is closed."""
+    faces, edge_faces, key = mesh_np["faces"], mesh_np["edge_faces"], mesh_np["key"]
+    n_v = mesh_np["n_vertices"]
+
+    def edge_id(a: int, b: int) -> int:
+        a, b = min(a, b), max(a, b)
+        return int(np.searchsorted(key, a * n_v + b))
+
+    def step(f: int, forward: bool) -> tuple[int, int]:
+        i = int(np.flatnonzero(faces[f] == v)[0])
+        w = faces[f, (i + 2) % 3] if forward else faces[f, (i + 1) % 3]
+        e = edge_id(v, int(w))
+        other = edge_faces[e, 0] if edge_faces[e, 0] != f else edge_faces[e, 1]
+        return int(other), e
+
+    start = int(mesh_np["vertex_faces"][v, 0])
+    order, between = [start], []
+    f = start
+    while True:
+        nxt, e = step(f, True)
+        if nxt == start:
+            between.append(e)
+            return order, between, True
+        if nxt < 0:
+            break
+        between.append(e)
+        order.append(nxt)
+        f = nxt
+    # open fan: walk backwards from the start to the other boundary edge
+    f = start
+    while True:
+        prv, e = step(f, False)
+        if prv < 0:
+            return order, between, False
+        order.insert(0, prv)
+        between.insert(0, e)
+        f = prv
+
+
+def _arcs(fan, f_in: int, f_out: int) -> list[list[int]]:
+    """The edge sequences leading around the vertex from face f_in to f_out, one per
+    side (one when the fan is open)."""
+    order, between, closed = fan
+    if f_in not in order or f_out not in order:
+        return []
+    i, o, m = order.index(f_in), order.index(f_out), len(order)
+    if not closed:
+        return [between[i:o] if i <= o else between[o:i][::-1]]
+    forward = [between[(i + j) % m] for j in range((o - i) % m)]
+    backward = [between[(i - 1 - j) % m] for j in range((i - o) % m)]
+    return [forward, backward]
+
+
+def _unfolded_crossings(verts, faces, edges, v, arc, f_in, f_out, a, b):
+    """Parameters where the segment a → b, unfolded into the plane with the faces
+    of the fan of v from f_in across the edges `arc` to f_out, crosses those edges
+    (0.02 from v where it misses)."""
+
+    def other(e):
+        return int(edges[e, 1] if edges[e, 0] == v else edges[e, 0])
+
+    def corner(f, e1, e2):  # flat angle at v between edges e1, e2 of face f
+        d1, d2 = verts[other(e1)] - verts[v], verts[other(e2)] - verts[v]
+        return np.arctan2(np.linalg.norm(np.cross(d1, d2)), d1 @ d2)
+
+    def face_edge(f, not_e):  # the edge at v of face f other than not_e
+        w = [int(x) for x in faces[f] if x != v and x != other(not_e)][0]
+        lo, hi = min(v, w), max(v, w)
+        return int(np.flatnonzero((edges[:, 0] == lo) & (edges[:, 1] == hi))[0])
+
+    def place(p, f, e_known, angle_known, sign):
+        """2-D image of point p of face f, given edge e_known at angle_known; the
+        face's other edge at v lies at angle_known + sign·corner."""
+        e_other = face_edge(f, e_known)
+        alpha = corner(f, e_known, e_other)
+        d1 = verts[other(e_known)] - verts[v]
+        d2 = verts[other(e_other)] - verts[v]
+        st = np.linalg.lstsq(np.stack([d1, d2], 1), p - verts[v], rcond=None)[0]
+        t1, t2 = angle_known, angle_known + sign * alpha
+        return st[0] * np.linalg.norm(d1) * np.array([np.cos(t1), np.sin(t1)]) + st[
+            1
+        ] * np.linalg.norm(d2) * np.array([np.cos(t2), np.sin(t2)])
+
+    angles = [0.0]
+    faces_seq = [f_in]
+    for k in range(1, len(arc)):
+        shared = [
+            f
+            for f in set(np.flatnonzero((faces == v).any(1)).tolist())
+            if set(faces[f].tolist()) >= {v, other(arc[k - 1]), other(arc[k])}
+        ]
+        faces_seq.append(shared[0])
+        angles.append(angles[-1] + corner(shared[0], arc[k - 1], arc[k]))
+    a2 = place(a, f_in, arc[0], 0.0, -1.0)
+    b2 = place(b, f_out, arc[-1], angles[-1], 1.0)
+    out = []
+    for e, phi in zip(arc, angles):
+        ray = np.array([np.cos(phi), np.sin(phi)])
+        m = np.stack([b2 - a2, -ray], 1)
+        try:
+            lam, mu = np.linalg.solve(m, -a2)
+        except np.linalg.LinAlgError:
+            lam, mu = -1.0, -1.0
+        length = np.linalg.norm(verts[other(e)] - verts[v])
+        t = mu / length if (0 < lam < 1 and mu > 0) else 0.02
+        t = float(np.clip(t, 1e-3, 1 - 1e-3))
+        out.append(t if edges[e, 0] == v else 1 - t)
+    return out
+
+
+def smooth_shortest_path(
+    mesh: Mesh,
+    start: SurfacePoint,
+    end: SurfacePoint,
+    elements: Int[ArrayLike, " n"],
+    params: Float[ArrayLike, " n"],
+    kinds: Int[ArrayLike, " n"] | None = None,
+    *,
+    repair: bool = True,
+    max_rounds: int = 8,
+    **options,
+) -> SmoothPath:
+    """`smooth_geodesic` on a strip, with strip repair at vertex contacts
+    (eager: not jit-able, the strip changes).
+
+    After each solve, runs of crossings pulled onto the same vertex become one
+    vertex node. For each vertex node the two ways around the vertex (the edges of
+    its fan between the faces the path enters and leaves by) are solved as well,
+    starting next to the vertex; the shortest of the three is kept (a side whose
+    crossings are pulled back onto the vertex ties with it, and the vertex stays).
+    Repeats until nothing changes or `max_rounds` is reached. `options` go to
+    `smooth_geodesic`.
+    """
+    mesh_np = {
+        "faces": np.asarray(mesh.faces),
+        "edges": np.asarray(mesh.edges),
+        "edge_faces": np.asarray(mesh.edge_faces),
+        "vertex_faces": np.asarray(mesh.vertex_faces),
+        "n_vertices": mesh.n_vertices,
+    }
+    edges_np = mesh_np["edges"].astype(np.int64)
+    mesh_np["key"] = edges_np[:, 0] * mesh.n_vertices + edges_np[:, 1]
+    elements = np.asarray(elements, np.int64).reshape(-1)
+    params = np.asarray(params, np.float64).reshape(-1)
+    kinds = (
+        np.full(elements.shape, EDGE)
+        if kinds is None
+        else np.asarray(kinds, np.int64).reshape(-1)
+    )
+    nodes = list(zip(kinds.tolist(), elements.tolist(), params.tolist()))
+
+    def solve(nodes):
+        n = len(nodes)
+        cap = _capacity(n)
+        k = np.full(cap, EDGE, np.int32)
+        el = np.zeros(cap, np.int32)
+        u = np.zeros(cap)
+        if n:
+            k[:n], el[:n], u[:n] = (np.asarray(c) for c in zip(*nodes))
+        return smooth_geodesic(mesh, start, end, el, u, k, count=n, **options)
+
+    def collapse(path: SmoothPath):
+        """Nodes of a solved path, runs of crossings at one vertex merged."""
+        n = int(path.count) - 2
+        out = []
+        for j in range(1, n + 1):
+            kind, elem = int(path.kinds[j]), int(path.elements[j])
+            u = float(path.params[j])
+            if kind == EDGE and (u <= 0.0 or u >= 1.0):
+                kind, elem = VERTEX, int(edges_np[elem, 0 if u <= 0.0 else 1])
+                u = 0.0
+            if kind == VERTEX and out and out[-1][:2] == (VERTEX, elem):
+                continue
+            out.append((kind, elem, u))
+        return out
+
+    best = solve(nodes)
+    if not repair:
+        return best
+
+    verts = np.asarray(mesh.vertices, np.float64)
+    ends = (
+        np.asarray(start.position(mesh), np.float64),
+        np.asarray(end.position(mesh), np.float64),
+    )
+
+    def flat(nodes, j):
+        """Flat 3-D position of node j (−1: start, len(nodes): end)."""
+        if j < 0 or j >= len(nodes):
+            return ends[0] if j < 0 else ends[1]
+        kind, elem, u = nodes[j]
+        if kind == VERTEX:
+            return verts[elem]
+        a, b = edges_np[elem]
+        return (1 - u) * verts[a] + u * verts[b]
+
+    def release(nodes, seg_faces, choice):
+        """Replace vertex node j by the edges of arc choice[j] of its fan, started
+        where the straight line between its neighbours crosses them in the
+        unfolded fan (next to the vertex when it misses that side)."""
+        out = []
+        for j, node in enumerate(nodes):
+            side = choice.get(j)
+            f_in, f_out = int(seg_faces[j]), int(seg_faces[j + 1])
+            arcs = [] if side is None else _arcs(_fan(mesh_np, node[1]), f_in, f_out)
+            if side is None or side >= len(arcs) or not arcs[side]:
+                out.append(node)
+                continue
+            v, arc = node[1], arcs[side]
+            u0 = _unfolded_crossings(
+                verts, mesh_np["faces"], edges_np, v, arc, f_in, f_out,
+                flat(nodes, j - 1), flat(nodes, j + 1),
+            )  # fmt: skip
+            out += [(EDGE, e, w) for e, w in zip(arc, u0)]
+        return out
+
+    for _ in range(max_rounds):
+        nodes = collapse(best)
+        kept = solve(nodes)
+        seg_faces = np.asarray(kept.faces)
+        at = [j for j, node in enumerate(nodes) if node[0] == VERTEX]
+        if not at:
+            return kept
+        # every contact to the same side (a path hugging a row of vertices), then
+        # each contact alone to either side; the shortest wins
+        choices = [{j: side for j in at} for side in (0, 1)]
+        if len(at) > 1:
+            choices += [{j: side} for j in at for side in (0, 1)]
+        improved, length = None, float(kept.length)
+        for choice in choices:
+            cand = solve(release(nodes, seg_faces, choice))
+            ok = bool(cand.converged) and bool(cand.valid_strip)
+            if ok and float(cand.length) < length * (1 - 1e-13):
+                improved, length = cand, float(cand.length)
+        if improved is None:
+            return kept
+        best = improved
+    return best
