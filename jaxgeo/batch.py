@@ -45,7 +45,8 @@ def _check_batch(name: str, p: ArrayLike) -> np.ndarray:
 @eqx.filter_jit
 def _solve_chunk(mesh, p1, p2, max_distance, weighting, options):
     def one(a, b):
-        return _solve(mesh, a, b, max_distance, weighting, options)[0]
+        # The result leaves as numpy (not differentiable): no replay needed.
+        return _solve(mesh, a, b, max_distance, weighting, options, False)[0]
 
     return jax.vmap(one)(p1, p2)
 

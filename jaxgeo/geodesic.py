@@ -74,6 +74,7 @@ def _solve(
     max_distance: float,
     weighting: str,
     options: TraceOptions,
+    differentiable: bool = True,
 ) -> tuple[Path, SurfacePoint, SurfacePoint, Float[Array, "2"]]:
     start, d1 = _as_surface_point(mesh, p1)
     end, d2 = _as_surface_point(mesh, p2)
@@ -91,7 +92,10 @@ def _solve(
         options,
         initial,
     )
-    path = replay(mesh, normals, start, end, traced)
+    # The replay only attaches derivatives: its points equal the traced ones to
+    # rounding. Concrete calls outside any transformation cannot be differentiated
+    # afterwards, so they skip it.
+    path = replay(mesh, normals, start, end, traced) if differentiable else traced
     return path, start, end, jnp.stack([d1, d2])
 
 
@@ -134,7 +138,9 @@ def shortest_path(
         _check_point("p1", p1, mesh)
         _check_point("p2", p2, mesh)
     options = TraceOptions(candidates=candidates, max_points=max_points)
-    path, _, _, dist = _solve(mesh, p1, p2, max_distance, normals, options)
+    path, _, _, dist = _solve(
+        mesh, p1, p2, max_distance, normals, options, differentiable=not concrete
+    )
     if throw and concrete:
         status = Status(int(path.status))
         if status != Status.SUCCESS:
