@@ -68,6 +68,7 @@ class Topology:
         edge_faces = np.asarray(mesh.edge_faces, dtype=np.int64)
         face_edges = np.asarray(mesh.face_edges, dtype=np.int64)
         self.vertices, self.faces, self.edges = v, f, edges
+        self._face_list = f.tolist()
         self.face_edges = face_edges
         across = edge_faces[face_edges]  # (F, 3, 2)
         me = np.arange(f.shape[0])[:, None]
@@ -99,8 +100,8 @@ class Topology:
 
     def corner(self, face: int, vertex: int) -> int:
         """The corner (0, 1, 2) of `face` at `vertex`, or -1."""
-        hit = np.flatnonzero(self.faces[face] == vertex)
-        return int(hit[0]) if hit.size else -1
+        corners = self._face_list[face]
+        return corners.index(vertex) if vertex in corners else -1
 
     def rotate(self, face: int, vertex: int, ccw: bool) -> int:
         """The next face around `vertex` from `face`, counter-clockwise (seen from
@@ -140,8 +141,14 @@ class Topology:
 
     # ------------------------------------------------------------ Dijkstra
 
-    def vertex_path(self, start: EndPoint, end: EndPoint) -> list[int]:
-        """Shortest path on the edge graph, from the start point to the end point.
+    def vertex_paths(
+        self, start: EndPoint, end: EndPoint, n_via: int = 0
+    ) -> list[list[int]]:
+        """Shortest paths on the edge graph from the start point to the end point:
+        the shortest one, then up to `n_via` shortest ones through other *via*
+        vertices, picked at mid-distance (d_start ≈ d_end) by increasing
+        d_start + d_end and at least one mean edge length apart, to start the
+        corridor search from more than one side.
 
         A point that is not a vertex becomes an extra node joined to the corners of
         its face (node `V` for the start, `V + 1` for the end).
@@ -165,6 +172,8 @@ class Topology:
             rows += [nodes[0], nodes[1]]
             cols += [nodes[1], nodes[0]]
             data += [d, d]
+        if nodes[0] == nodes[1]:
+            return [[nodes[0]]]
         r0, c0, d0 = self._graph
         graph = sp.csr_matrix(
             (
@@ -173,20 +182,36 @@ class Topology:
             ),
             shape=(n + 2, n + 2),
         )
-        if nodes[0] == nodes[1]:
-            return [nodes[0]]
-        _, pred = dijkstra(
-            graph, indices=nodes[0], return_predecessors=True, min_only=False
+        dist, pred = dijkstra(
+            graph, indices=nodes, return_predecessors=True, min_only=False
         )
-        path = [nodes[1]]
-        while path[-1] != nodes[0]:
-            prev = int(pred[path[-1]])
-            if prev < 0:
-                raise JaxgeoError(
-                    "the start and end points lie on different connected components"
-                )
-            path.append(prev)
-        return path[::-1]
+
+        def walk(k: int, node: int) -> list[int]:
+            out = [node]
+            while out[-1] != nodes[k]:
+                prev = int(pred[k, out[-1]])
+                if prev < 0:
+                    raise JaxgeoError(
+                        "the start and end points lie on different connected components"
+                    )
+                out.append(prev)
+            return out
+
+        paths = [walk(0, nodes[1])[::-1]]
+        if n_via > 0 and np.isfinite(dist[0, nodes[1]]):
+            da, db = dist[0, :n], dist[1, :n]
+            band = np.flatnonzero(np.abs(da - db) <= self.mean_edge_length)
+            band = band[np.argsort(da[band] + db[band])]
+            mid = paths[0][len(paths[0]) // 2]
+            picked = [self.vertices[mid]] if mid < n else []
+            for v in band.tolist():
+                if len(paths) > n_via:
+                    break
+                x = self.vertices[v]
+                if all(np.linalg.norm(x - y) >= self.mean_edge_length for y in picked):
+                    picked.append(x)
+                    paths.append(walk(0, v)[::-1] + walk(1, v)[1:])
+        return paths
 
     def vertex_path_corridor(
         self, path: Sequence[int], start: EndPoint, end: EndPoint
@@ -231,7 +256,7 @@ class Topology:
             if best is None:
                 raise JaxgeoError(f"no fan of faces around vertex {v} joins the path")
             out += best
-        return out
+        return _drop_backtracks(out)
 
 
 _CACHE: dict[int, tuple[weakref.ref, Topology]] = {}
@@ -275,6 +300,17 @@ def clean_corridor(
     """Drop repeated faces (a, a -> a), back-tracks (a, b, a -> a) and the faces at
     either end that the path need not cross (while the next face also holds the
     end point)."""
+    stack = _drop_backtracks(corridor)
+    lo, hi = 0, len(stack) - 1
+    while lo < hi and start.in_face(topo, stack[lo + 1]):
+        lo += 1
+    while hi > lo and end.in_face(topo, stack[hi - 1]):
+        hi -= 1
+    return stack[lo : hi + 1]
+
+
+def _drop_backtracks(corridor: Sequence[int]) -> list[int]:
+    """Remove repeated faces (a, a -> a) and back-tracks (a, b, a -> a)."""
     stack: list[int] = []
     for f in corridor:
         f = int(f)
@@ -284,9 +320,4 @@ def clean_corridor(
             stack.pop()
             continue
         stack.append(f)
-    lo, hi = 0, len(stack) - 1
-    while lo < hi and start.in_face(topo, stack[lo + 1]):
-        lo += 1
-    while hi > lo and end.in_face(topo, stack[hi - 1]):
-        hi -= 1
-    return stack[lo : hi + 1]
+    return stack

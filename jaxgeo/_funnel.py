@@ -17,7 +17,6 @@ is always an instance, never a clipped edge parameter.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,7 +82,7 @@ def unfold(
         q = v[w_vid] - v[r_vid]
         el = np.linalg.norm(e, axis=1)
         px = np.sum(e * q, axis=1) / el
-        py = np.linalg.norm(np.cross(e, q), axis=1) / el
+        py = np.linalg.norm(_cross3(e, q), axis=1) / el
         a_vid = fv[0, apex_corner[0]]
         qa = v[a_vid] - v[r_vid[0]]
         ax = float(np.dot(e[0], qa) / el[0])
@@ -139,6 +138,17 @@ def unfold(
         run_end,
         s_inst,
         e_inst,
+    )
+
+
+def _cross3(e: np.ndarray, q: np.ndarray) -> np.ndarray:
+    return np.stack(
+        [
+            e[..., 1] * q[..., 2] - e[..., 2] * q[..., 1],
+            e[..., 2] * q[..., 0] - e[..., 0] * q[..., 2],
+            e[..., 0] * q[..., 1] - e[..., 1] * q[..., 0],
+        ],
+        axis=-1,
     )
 
 
@@ -245,7 +255,7 @@ def solve(strip: Strip, touch_tol: float) -> Solution:
     sol = Solution(strip, points)
     n_portal = strip.left.size
     total = 0.0
-    for a, b in zip(points[:-1], points[1:]):
+    for a, b in zip(points[:-1], points[1:], strict=True):
         p0 = 0 if a == strip.start else int(strip.run_end[a]) + 1
         p1 = n_portal - 1 if b == strip.end else int(strip.run_start[b]) - 1
         if p1 < p0:
@@ -282,34 +292,34 @@ def _common_face(strip: Strip, a: int, b: int) -> int:
 
 
 def _add_touches(strip: Strip, points: list[int], tol: float) -> list[int]:
+    """Insert, as contacts, the corridor vertices within `tol` of a segment."""
     n_portal = strip.left.size
-    out = [points[0]]
-    for a, b in zip(points[:-1], points[1:]):
-        p0 = 0 if a == strip.start else int(strip.run_end[a]) + 1
-        p1 = n_portal - 1 if b == strip.end else int(strip.run_start[b]) - 1
-        if p1 >= p0:
-            cand = np.unique(
-                np.concatenate([strip.left[p0 : p1 + 1], strip.right[p0 : p1 + 1]])
-            )
-            cand = cand[(strip.run_start[cand] >= p0) & (strip.run_end[cand] <= p1)]
-            if cand.size:
-                pa, pb = strip.xy[a], strip.xy[b]
-                d = pb - pa
-                ll = float(d @ d)
-                rel = strip.xy[cand] - pa
-                t = rel @ d / ll if ll > 0 else np.zeros(cand.size)
-                dist = (
-                    np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]) / math.sqrt(ll)
-                    if ll > 0
-                    else np.linalg.norm(rel, axis=1)
-                )
-                hit = (dist <= tol) & (t > 0) & (t < 1)
-                cand = cand[hit]
-                cand = cand[np.argsort(strip.run_start[cand], kind="stable")]
-                last = p0 - 1
-                for c in cand.tolist():
-                    if strip.run_start[c] > last:
-                        out.append(c)
-                        last = int(strip.run_end[c])
-        out.append(b)
-    return out
+    if n_portal == 0:
+        return points
+    # segment of each portal
+    firsts = [0] + [int(strip.run_end[p]) + 1 for p in points[1:-1]]
+    seg_of = np.searchsorted(np.asarray(firsts), np.arange(n_portal), "right") - 1
+    cand = np.unique(np.concatenate([strip.left, strip.right]))
+    cand = cand[np.isin(cand, points, invert=True)]
+    seg = seg_of[strip.run_start[cand]]
+    ok = seg == seg_of[strip.run_end[cand]]
+    pts = np.asarray(points)
+    a, b = strip.xy[pts[seg]], strip.xy[pts[seg + 1]]
+    d, rel = b - a, strip.xy[cand] - a
+    ll = np.maximum(np.sum(d * d, axis=1), 1e-300)
+    t = np.sum(rel * d, axis=1) / ll
+    dist = np.abs(rel[:, 0] * d[:, 1] - rel[:, 1] * d[:, 0]) / np.sqrt(ll)
+    hit = ok & (dist <= tol) & (t > 0) & (t < 1)
+    if not hit.any():
+        return points
+    cand, seg = cand[hit], seg[hit]
+    order = np.argsort(strip.run_start[cand], kind="stable")
+    out = list(points)
+    inserted = []
+    last = -1
+    for c in cand[order].tolist():
+        if strip.run_start[c] > last:
+            inserted.append(c)
+            last = int(strip.run_end[c])
+    out = sorted(out[1:-1] + inserted, key=lambda i: (int(strip.run_start[i]), i))
+    return [points[0], *out, points[-1]]

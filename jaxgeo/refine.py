@@ -177,7 +177,8 @@ def dijkstra_corridor(
     topo = topology(mesh)
     start = EndPoint(topo, start_face, start_bary)
     end = EndPoint(topo, end_face, end_bary)
-    return topo.vertex_path_corridor(topo.vertex_path(start, end), start, end)
+    path = topo.vertex_paths(start, end)[0]
+    return topo.vertex_path_corridor(path, start, end)
 
 
 # ------------------------------------------------------------ contact moves
@@ -199,9 +200,11 @@ def _ray_coord(topo: Topology, strip: Strip, v: int, k: int, target: int) -> flo
         s = int(corners[(corners != v) & (corners != other)][0])
     else:
         s = _other_end(strip, k - 1, v)
-    o = strip.xy[v]
-    a, b = strip.xy[target] - o, strip.xy[s] - o
-    ang = math.atan2(abs(a[0] * b[1] - a[1] * b[0]), float(a @ b))
+    ox, oy = strip.xy[v].tolist()
+    ax, ay = strip.xy[target].tolist()
+    bx, by = strip.xy[s].tolist()
+    ax, ay, bx, by = ax - ox, ay - oy, bx - ox, by - oy
+    ang = math.atan2(abs(ax * by - ay * bx), ax * bx + ay * by)
     corner = topo.corner_angle[faces[k], topo.corner(int(faces[k]), vid)]
     return acc + min(ang, corner)
 
@@ -210,15 +213,18 @@ def _other_end(strip: Strip, portal: int, v: int) -> int:
     return int(strip.right[portal] if strip.left[portal] == v else strip.left[portal])
 
 
-def _moves(topo: Topology, sol: Solution) -> list[tuple[float, int, int, int]]:
+def _moves(
+    topo: Topology, sol: Solution, frozen: frozenset[int] = frozenset()
+) -> list[tuple[float, int, int, int]]:
     """Contacts where the path can be shortened: (angle on the far side, first and
-    last corridor index of the faces to replace, mesh vertex)."""
+    last corridor index of the faces to replace, mesh vertex). Contacts at
+    `frozen` vertices stay."""
     strip = sol.strip
     out = []
     for t in range(1, len(sol.points) - 1):
         v = sol.points[t]
         vid = int(strip.vid[v])
-        if topo.boundary_vertex[vid]:
+        if topo.boundary_vertex[vid] or vid in frozen:
             continue
         i, j = int(strip.run_start[v]), int(strip.run_end[v])
         k_in = sol.seg_face[t - 1] if sol.seg_face[t - 1] >= 0 else i
@@ -256,6 +262,7 @@ def _refine(
     start: EndPoint,
     end: EndPoint,
     max_iter: int,
+    frozen: frozenset[int] = frozenset(),
 ) -> tuple[Solution, list[int], bool]:
     corridor = clean_corridor(check_corridor(topo, corridor).tolist(), start, end, topo)
     if not start.in_face(topo, corridor[0]) or not end.in_face(topo, corridor[-1]):
@@ -269,11 +276,83 @@ def _refine(
         sol = solve(unfold(topo, corridor, start, end), tol)
         if best is None or sol.length <= best[0].length:
             best = (sol, corridor)
-        moves = _moves(topo, sol)
+        moves = _moves(topo, sol, frozen)
         if not moves:
             return sol, corridor, True
         corridor = clean_corridor(_apply_moves(topo, corridor, moves), start, end, topo)
     return best[0], best[1], False
+
+
+def _near_walls(sol: Solution, radius: float) -> list[tuple[float, int]]:
+    """Corridor vertices (instances) the path passes within `radius` of without
+    touching them, nearest first: (distance, instance)."""
+    strip = sol.strip
+    out = []
+    for s, (p0, p1) in enumerate(sol.seg_portals):
+        if p1 < p0:
+            continue
+        cand = np.unique(
+            np.concatenate([strip.left[p0 : p1 + 1], strip.right[p0 : p1 + 1]])
+        )
+        cand = cand[(strip.run_start[cand] >= p0) & (strip.run_end[cand] <= p1)]
+        a, b = strip.xy[sol.points[s]], strip.xy[sol.points[s + 1]]
+        d = b - a
+        rel = strip.xy[cand] - a
+        dist = np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]) / np.linalg.norm(d)
+        out += [
+            (float(x), int(c)) for x, c in zip(dist, cand, strict=True) if x < radius
+        ]
+    return sorted(out)
+
+
+def _explore(
+    topo: Topology,
+    sol: Solution,
+    corridor: list[int],
+    start: EndPoint,
+    end: EndPoint,
+    max_iter: int,
+    radius: float,
+    max_tries: int,
+) -> tuple[Solution, list[int]]:
+    """Look for a shorter locally-shortest path in neighbouring classes: force the
+    path to the other side of a vertex it passes near, relax with that vertex held
+    (`frozen`), and keep the result if it is shorter and has left the vertex.
+
+    Only vertices of positive curvature (angle sum below 2π) are tried: two
+    geodesics from A to B bound a bigon whose enclosed curvature is, by
+    Gauss-Bonnet, the sum of its two corner angles, so it must hold a vertex of
+    positive curvature; around flat or saddle vertices there is nothing to find.
+    """
+    tried: set[int] = set()
+    tries = 0
+    improved = True
+    while improved and tries < max_tries:
+        improved = False
+        for _, inst in _near_walls(sol, radius):
+            vid = int(sol.strip.vid[inst])
+            if (
+                vid in tried
+                or topo.boundary_vertex[vid]
+                or topo.angle_sum[vid] >= 2.0 * math.pi - ANGLE_TOL
+                or tries >= max_tries
+            ):
+                continue
+            tried.add(vid)
+            tries += 1
+            lo = int(sol.strip.run_start[inst])
+            hi = int(sol.strip.run_end[inst]) + 1
+            ccw = topo.rotate(corridor[lo], vid, True) == corridor[lo + 1]
+            fan = topo.fan(vid, corridor[lo], corridor[hi], not ccw)
+            if fan is None:
+                continue
+            trial = corridor[:lo] + fan + corridor[hi + 1 :]
+            new, faces, _ = _refine(topo, trial, start, end, max_iter, frozenset([vid]))
+            touches = any(int(new.strip.vid[p]) == vid for p in new.points[1:-1])
+            if not touches and new.length < sol.length * (1.0 - 1e-14):
+                sol, corridor, improved = new, faces, True
+                break
+    return sol, corridor
 
 
 # ------------------------------------------------------------------ results
@@ -415,6 +494,10 @@ def exact_geodesic(
     *,
     dijkstra: bool = True,
     max_iter: int = 1000,
+    explore: bool = True,
+    explore_radius: float = 0.25,
+    explore_tries: int = 40,
+    n_via: int = 2,
 ) -> ExactPath:
     """The exact locally-shortest polyhedral geodesic between two surface points,
     the shortest over several starting corridors.
@@ -441,15 +524,24 @@ def exact_geodesic(
     end = EndPoint(topo, end_face, end_bary)
     todo = [list(c) for c in (corridors or [])]
     if dijkstra:
-        todo.append(topo.vertex_path_corridor(topo.vertex_path(start, end), start, end))
+        for path in topo.vertex_paths(start, end, n_via):
+            todo.append(topo.vertex_path_corridor(path, start, end))
     if not todo:
         raise JaxgeoError("exact_geodesic needs a corridor or dijkstra=True")
-    best = None
-    for corridor in todo:
-        sol, faces, ok = _refine(topo, corridor, start, end, max_iter)
-        if best is None or sol.length < best[0].length:
-            best = (sol, faces, ok)
-    sol, faces, ok = best
+    results = [_refine(topo, c, start, end, max_iter) for c in todo]
+    results.sort(key=lambda r: r[0].length)
+    sol, faces, ok = results[0]
+    if explore and ok:
+        sol, faces = _explore(
+            topo,
+            sol,
+            faces,
+            start,
+            end,
+            max_iter,
+            explore_radius * topo.mean_edge_length,
+            explore_tries,
+        )
     pts, kinds, elems, params = _polyline(topo, sol, start, end)
     return ExactPath(
         points=_f(pts),
@@ -470,10 +562,6 @@ def exact_geodesic(
 # ------------------------------------------------------ differentiable length
 
 
-def _cross_norm(e: Float[Array, "3"], q: Float[Array, "3"]) -> Float[Array, ""]:
-    return safe_norm(jnp.cross(e, q))
-
-
 @eqx.filter_jit
 def _structure_length(
     vertices: Float[Array, "V 3"], st: PathStructure, coef: Float[Array, " 8"]
@@ -481,31 +569,31 @@ def _structure_length(
     v = vertices
     zero2 = jnp.zeros(2, dtype=v.dtype)
 
+    # gathers outside the scan: inside it their transpose would scatter into a
+    # (V, 3) cotangent at every step
+    e = v[st.step_l] - v[st.step_r]
+    qw = v[st.step_w] - v[st.step_r]
+    qa = v[st.step_apex] - v[st.step_r]
+    el = safe_norm(e)
+    el_ = jnp.where(el > 0, el, 1.0)
+    wx, wy = jnp.sum(e * qw, -1) / el_, safe_norm(jnp.cross(e, qw)) / el_
+    ax, ay = jnp.sum(e * qa, -1) / el_, safe_norm(jnp.cross(e, qa)) / el_
+
     def step(carry, x):
         l2c, r2c = carry
-        first, li, ri, wi, ai, keep = x
-        e = v[li] - v[ri]
-        el = safe_norm(e)
-        el_ = jnp.where(el > 0, el, 1.0)
+        first, keep, el, wx, wy, ax, ay = x
         l2 = jnp.where(first, jnp.stack([jnp.zeros_like(el), el]), l2c)
         r2 = jnp.where(first, zero2, r2c)
         d = l2 - r2
-        dn = d / jnp.where(safe_norm(d) > 0, safe_norm(d), 1.0)
+        nd = safe_norm(d)
+        dn = d / jnp.where(nd > 0, nd, 1.0)
         fwd = jnp.stack([dn[1], -dn[0]])
-        qw, qa = v[wi] - v[ri], v[ai] - v[ri]
-        w2 = r2 + (e @ qw / el_) * dn + (_cross_norm(e, qw) / el_) * fwd
-        a2 = r2 + (e @ qa / el_) * dn - (_cross_norm(e, qa) / el_) * fwd
+        w2 = r2 + wx * dn + wy * fwd
+        a2 = r2 + ax * dn - ay * fwd
         nxt = (jnp.where(keep, l2, w2), jnp.where(keep, w2, r2))
         return nxt, (l2, r2, w2, a2)
 
-    xs = (
-        st.step_first,
-        st.step_l,
-        st.step_r,
-        st.step_w,
-        st.step_apex,
-        st.step_keep_left,
-    )
+    xs = (st.step_first, st.step_keep_left, el, wx, wy, ax, ay)
     _, (l2, r2, w2, a2) = jax.lax.scan(step, (zero2, zero2), xs)
     ca, cb = coef[st.a_src], coef[st.b_src]
     f, g = st.seg_first, st.seg_last
