@@ -202,7 +202,8 @@ def test_never_longer_than_graph_path_nor_shorter_than_chord():
 
 
 def _fd_check(fn, x, n_dir=8, step=1e-6, seed=0):
-    g = np.asarray(jax.grad(fn)(x))
+    g = np.asarray(jax.jit(jax.grad(fn))(x))
+    fn = jax.jit(fn)
     assert np.all(np.isfinite(g))
     rng = np.random.default_rng(seed)
     for _ in range(n_dir):
