@@ -596,6 +596,7 @@ def smooth_shortest_path(
     *,
     repair: bool = True,
     max_rounds: int = 8,
+    capacity: int | None = None,
     **options,
 ) -> SmoothPath:
     """`smooth_geodesic` on a strip, with strip repair at vertex contacts
@@ -606,8 +607,9 @@ def smooth_shortest_path(
     its fan between the faces the path enters and leaves by) are solved as well,
     starting next to the vertex; the shortest of the three is kept (a side whose
     crossings are pulled back onto the vertex ties with it, and the vertex stays).
-    Repeats until nothing changes or `max_rounds` is reached. `options` go to
-    `smooth_geodesic`.
+    Repeats until nothing changes or `max_rounds` is reached. `capacity`: buffer
+    size (default: the next power of two ≥ 32; fix it to reuse one compiled
+    shape). `options` go to `smooth_geodesic`.
     """
     mesh_np = {
         "faces": np.asarray(mesh.faces),
@@ -629,7 +631,7 @@ def smooth_shortest_path(
 
     def solve(nodes):
         n = len(nodes)
-        cap = _capacity(n)
+        cap = _capacity(n) if capacity is None or capacity < n else capacity
         k = np.full(cap, EDGE, np.int32)
         el = np.zeros(cap, np.int32)
         u = np.zeros(cap)
