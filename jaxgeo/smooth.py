@@ -18,6 +18,12 @@ gradient pushes outwards are held there (the path touches that vertex). Iteratio
 continue until the projected gradient is below `gtol`·(mean edge length), about
 1e-12 by default.
 
+Strip repair (`smooth_shortest_path`, eager): a crossing pulled onto an end of its
+edge means the path touches a vertex; runs of such crossings become one vertex
+node, and the path is released to either side of the vertex's fan (all contacts
+together, or one at a time), started on the unfolded straight line; the shortest
+result wins, until nothing changes.
+
 Differentiation. At the solution L is stationary in the free u (and the bounds do
 not depend on the mesh), so by the envelope theorem dL/dθ = ∂L/∂θ at fixed u* for
 every input θ (vertices, normals through the vertices, endpoints). The solver runs
@@ -42,7 +48,7 @@ from .mesh import Mesh
 from .normals import Weighting, vertex_normals
 from .path import EDGE, FACE, VERTEX
 
-__all__ = ["SmoothPath", "phong_point", "smooth_geodesic"]
+__all__ = ["SmoothPath", "phong_point", "smooth_geodesic", "smooth_shortest_path"]
 
 
 class SmoothPath(eqx.Module):
