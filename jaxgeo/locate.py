@@ -94,6 +94,10 @@ def locate(
     bary = bary / jnp.sum(bary, axis=1, keepdims=True)
     closest = jnp.einsum("fi,fij->fj", bary, tri)
     dist2 = jnp.sum((closest - point) ** 2, axis=1)
+    # A NaN distance (a NaN vertex, e.g. from `Mesh.with_vertices`, or a NaN point)
+    # must never win the argmin (jnp.argmin returns the first NaN): it counts as
+    # infinitely far, so a NaN point is FAR_FROM_SURFACE, not a point of face 0.
+    dist2 = jnp.where(jnp.isnan(dist2), jnp.inf, dist2)
     face = jnp.argmin(dist2)
     return SurfacePoint(face, bary[face]), jnp.sqrt(dist2[face])
 

@@ -25,12 +25,15 @@ Candidates:
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from typing import Literal
 
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from ._errors import JaxgeoError
+from ._numerics import eps_of, safe_normalize
 from .locate import SurfacePoint, snap
 from .mesh import Mesh
 from .path import EDGE, FACE, VERTEX, Path, Status, pad_tail, polyline_length
@@ -53,11 +56,19 @@ class TraceOptions:
 
     def __post_init__(self):
         if self.candidates not in ("local", "all"):
-            raise ValueError(
+            raise JaxgeoError(
                 f"candidates must be 'local' or 'all', not {self.candidates!r}"
             )
-        if self.max_points < 2:
-            raise ValueError("max_points must be at least 2")
+        for name, low in (("max_points", 2), ("newton_steps", 1)):
+            value = getattr(self, name)
+            # bool is an int subclass, but max_points=True is a mistake
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise JaxgeoError(
+                    f"{name} must be an integer, got {type(value).__name__} {value!r}"
+                )
+            if value < low:
+                raise JaxgeoError(f"{name} must be at least {low}, got {value}")
+            object.__setattr__(self, name, int(value))  # np.int64 → int: hashable
 
 
 def star_faces(
@@ -108,6 +119,7 @@ def trace(
     # A branch: a second valid crossing ahead, farther than this from the chosen
     # one (well above the solver's noise, well below any edge length).
     branch_gap = 1e-6 * mesh.mean_edge_length
+    slide_margin = 1e3 * eps_of(dtype)
 
     if options.candidates == "all":
         all_edges = jnp.arange(mesh.n_edges, dtype=edges.dtype)
@@ -132,8 +144,34 @@ def trace(
         )
         return cand, live & ~through_p
 
+    def boundary_slide(pos, kind, idx, star, came_from):
+        """The boundary vertex to slide to when no crossing lies ahead: among the
+        ends of the boundary edges through the current point (its vertex's two; its
+        edge; a start face's), the one whose direction from the current point is
+        closest to the chord's, if that direction is ahead (positive cosine) and
+        the vertex is not the one the path just came from. Returns
+        `(possible, vertex)`."""
+        se = mesh.face_edges[jnp.maximum(star, 0)].reshape(-1)
+        ends = edges[se]  # (3S, 2)
+        through = jnp.where(
+            kind == VERTEX,
+            jnp.any(ends == idx, axis=1),
+            jnp.where(kind == EDGE, se == idx, True),
+        )
+        usable = jnp.repeat(star >= 0, 3) & (mesh.edge_faces[se, 1] < 0) & through
+        w = ends.reshape(-1)
+        usable = jnp.repeat(usable, 2) & (w != came_from)
+        usable = usable & ~((kind == VERTEX) & (w == idx))
+        step_dir = safe_normalize(verts[w] - pos)
+        cosine = step_dir @ safe_normalize(p2 - pos)
+        # "Ahead" with a margin well above rounding of the unit vectors.
+        usable = usable & (cosine > slide_margin)
+        best = jnp.argmax(jnp.where(usable, cosine, -jnp.inf))
+        return jnp.any(usable), w[best].astype(jnp.int32)
+
     def step(state):
-        (pos, kind, idx, count, status, pts, kinds, elems, params, branch) = state
+        (pos, kind, idx, came_from, count, status) = state[:6]
+        (pts, kinds, elems, params, branch) = state[6:]
         star = star_faces(mesh, kind, idx)
         reached = jnp.any((star[:, None] == target[None, :]) & (star[:, None] >= 0))
         cand, live = candidates(kind, idx)
@@ -152,9 +190,13 @@ def trace(
         dist = jnp.where(ok, dist, jnp.inf)
         best = jnp.argmin(dist)
         c, r = best // 2, best % 2
-        found = jnp.any(ok)
+        crossed = jnp.any(ok)
         u = cr.u[c, r]
         point = cr.point[c, r]
+        # No crossing ahead on the boundary: slide along a boundary edge instead.
+        slide, slide_to = boundary_slide(pos, kind, idx, star, came_from)
+        follow = ~crossed & slide
+        found = crossed | slide
         # Branch point (section 6): the face(s) ahead hold a second crossing.
         elsewhere = jnp.linalg.norm(cr.point - point, axis=-1) > branch_gap
         n_ahead = jnp.sum(ok & elsewhere & in_star(cand, star)[:, None])
@@ -163,8 +205,12 @@ def trace(
         vertex = jnp.where(u <= tol, e0[c], e1[c])
         new_idx = jnp.where(new_kind == VERTEX, vertex, cand[c]).astype(jnp.int32)
         new_kind = new_kind.astype(jnp.int32)
+        new_kind = jnp.where(follow, VERTEX, new_kind).astype(jnp.int32)
+        vertex = jnp.where(follow, slide_to, vertex)
+        new_idx = jnp.where(follow, slide_to, new_idx).astype(jnp.int32)
         point = jnp.where(new_kind == VERTEX, verts[vertex], point)
         u = jnp.where(new_kind == VERTEX, 0.0, u)
+        n_ahead = jnp.where(follow, 0, n_ahead)
 
         full = count >= m - 1  # keep one slot for point 2
         new_status = jnp.where(
@@ -193,6 +239,8 @@ def trace(
             jnp.where(moving, point, pos),
             jnp.where(moving, new_kind, kind),
             jnp.where(moving, new_idx, idx),
+            # the vertex the path leaves (a slide may not return to it at once)
+            jnp.where(moving, jnp.where(kind == VERTEX, idx, -1), came_from),
             count + append.astype(jnp.int32),
             new_status,
             pts,
@@ -211,6 +259,7 @@ def trace(
         p1,
         kind1,
         idx1,
+        jnp.asarray(-1, jnp.int32),
         jnp.asarray(1, jnp.int32),
         jnp.asarray(initial_status, jnp.int32),
         pts,
@@ -219,8 +268,8 @@ def trace(
         params,
         branch,
     )
-    state = jax.lax.while_loop(lambda s: s[4] < 0, step, state)
-    _, _, _, count, status, pts, kinds, elems, params, branch = state
+    state = jax.lax.while_loop(lambda s: s[5] < 0, step, state)
+    _, _, _, _, count, status, pts, kinds, elems, params, branch = state
     pts = pad_tail(pts, count)
     return Path(
         points=pts,

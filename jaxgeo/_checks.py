@@ -1,0 +1,111 @@
+"""Eager checks of the arguments of `shortest_path` and `shortest_paths`.
+
+Everything here runs in Python/numpy before anything is traced, and raises
+`JaxgeoError` naming the argument and the problem. Traced values (under `jax.jit`,
+`jax.vmap`, `jax.grad`) cannot be inspected and are skipped; there the result's
+`Path.status` is the check.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import numpy as np
+
+from ._errors import JaxgeoError
+
+#: The vertex-normal weightings of `jaxgeo.normals.vertex_normals`.
+WEIGHTINGS = ("uniform", "area", "angle")
+#: The candidate-edge sets of `jaxgeo.trace`.
+CANDIDATES = ("local", "all")
+
+
+def _traced(x: Any) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
+
+
+def _check_bool(name: str, value: Any) -> None:
+    if not isinstance(value, bool | np.bool_):
+        raise JaxgeoError(f"{name} must be True or False, got {value!r}")
+
+
+def _check_int(name: str, value: Any, low: int) -> None:
+    if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Integral):
+        raise JaxgeoError(
+            f"{name} must be an integer, got {type(value).__name__} {value!r}"
+        )
+    if value < low:
+        raise JaxgeoError(f"{name} must be at least {low}, got {value}")
+
+
+def check_mesh_vertices(mesh) -> None:
+    """The vertex array of a concrete mesh is float32/float64 and finite.
+
+    `Mesh(...)` validates its input, but `Mesh.with_vertices` does not (it must
+    accept tracers), so a NaN or a wrong dtype can reach the solver that way; a NaN
+    vertex would otherwise give NaN crossings or a wrong nearest face."""
+    v = mesh.vertices
+    if _traced(v):
+        return
+    v = np.asarray(v)
+    if v.dtype not in (np.float32, np.float64):
+        raise JaxgeoError(
+            f"mesh.vertices must be float32 or float64, got dtype {v.dtype} (set "
+            "with Mesh.with_vertices?)"
+        )
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise JaxgeoError(
+            "mesh.vertices has NaN or infinite coordinates at vertices "
+            f"{np.flatnonzero(bad)[:10].tolist()} (Mesh.with_vertices does not "
+            "re-validate)"
+        )
+
+
+def check_arguments(
+    mesh,
+    candidates: Any = "local",
+    max_points: Any = 1024,
+    normals: Any = "uniform",
+    max_distance: Any = 0.5,
+    throw: Any = True,
+) -> None:
+    """Check the options shared by `shortest_path` and `shortest_paths` and the
+    mesh's vertex array.
+
+    **Raises** `JaxgeoError` naming the argument: an unknown `candidates` or
+    `normals`; a `max_points` that is not an integer ≥ 2; a `max_distance` that is
+    not a positive real number (NaN would silently accept any endpoint; +inf is
+    allowed and means no limit); a non-bool `throw`; a mesh whose vertices are not
+    finite floats.
+    """
+    if not isinstance(candidates, str) or candidates not in CANDIDATES:
+        raise JaxgeoError(f"candidates must be one of {CANDIDATES}, not {candidates!r}")
+    if not isinstance(normals, str) or normals not in WEIGHTINGS:
+        raise JaxgeoError(f"normals must be one of {WEIGHTINGS}, not {normals!r}")
+    _check_int("max_points", max_points, 2)
+    if not _traced(max_distance):
+        d = np.asarray(max_distance)
+        if d.shape != () or d.dtype.kind not in "fiu" or d.dtype == bool:
+            raise JaxgeoError(
+                f"max_distance must be a real number (mean edge lengths), got "
+                f"{max_distance!r}"
+            )
+        if not float(d) > 0:  # also catches NaN
+            raise JaxgeoError(f"max_distance must be positive, got {float(d)}")
+    _check_bool("throw", throw)
+    check_mesh_vertices(mesh)
+
+
+def check_batch_options(
+    chunk_size: Any, shard: Any, progress: Callable[[int, int], None] | None
+) -> None:
+    """`shortest_paths`' own options: `chunk_size` an integer ≥ 1, `shard` a bool,
+    `progress` callable or None."""
+    _check_int("chunk_size", chunk_size, 1)
+    _check_bool("shard", shard)
+    if progress is not None and not callable(progress):
+        raise JaxgeoError(f"progress must be callable or None, got {progress!r}")
