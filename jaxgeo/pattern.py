@@ -220,7 +220,13 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
     pairs = np.asarray([(a, b) for a, b, _ in seam_pairs], np.int64).reshape(-1, 2)
     sids = np.asarray([s for _, _, s in seam_pairs], np.int64)
     labels = _cloth_labels(F, pairs)
-    return CutMesh(P, F, pairs, sids, labels, seam_points)
+    cut = CutMesh(P, F, pairs, sids, labels, seam_points)
+    # canonical cloth order (by seam lists), stable across layouts of one topology
+    order = sorted(range(cut.n_cloths), key=lambda c: cut.cloth_seams()[c])
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    cut.cloth_of_face = rank[labels]
+    return cut
 
 
 def _edge_table(F: np.ndarray):
@@ -290,7 +296,8 @@ def _lscm(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     fixed_cols = np.concatenate([pins, pins + n])
     free_cols = np.concatenate([free, free + n])
     rhs = -A[:, fixed_cols] @ np.concatenate([pin_uv[:, 0], pin_uv[:, 1]])
-    sol = sp.linalg.lsqr(A[:, free_cols], rhs, atol=1e-12, btol=1e-12)[0]
+    Af = A[:, free_cols]
+    sol = sp.linalg.spsolve((Af.T @ Af).tocsc(), Af.T @ rhs)
     uv = np.zeros((n, 2))
     uv[pins] = pin_uv
     uv[free, 0] = sol[: len(free)]
@@ -353,10 +360,10 @@ def flatten_cloth(
         jac=jac,
         method="trf",
         x_scale="jac",
-        xtol=1e-12,
-        ftol=1e-12,
-        gtol=1e-12,
-        max_nfev=200,
+        xtol=1e-10,
+        ftol=1e-10,
+        gtol=1e-10,
+        max_nfev=30,
         tr_solver="lsmr",
     )
     return sol.x.reshape(n, 2), edges

@@ -127,7 +127,7 @@ class Weights:
     fill: float = 1.0
     equal: float = 1.0
     margin: float = 0.05
-    options: TraceOptions = TraceOptions(candidates="local", max_points=256)
+    options: TraceOptions = TraceOptions(candidates="local", max_points=160)
 
 
 # ----------------------------------------------------------------------- layouts
@@ -199,44 +199,90 @@ def radial_layout(mesh: Mesh, n: int, offset: float = 0.0) -> Layout:
 
 
 def peaks_layout(
-    mesh: Mesh, n_around: int, n_valley: int, valley_halfwidth: float
+    mesh: Mesh,
+    n_per_ring: int,
+    n_valley: int,
+    valley_halfwidth: float,
+    sector: float = 160.0,
+    shift: float = 0.02,
 ) -> Layout:
-    """Seams of a tent with several peak rings (the twin-peak tent, Fig. 13):
+    """Seams of a tent with two peak rings side by side along x (the twin-peak
+    tent, Fig. 13), plan view, z up:
 
-    - `n_valley` valley seams across the outer loop, from its top side to its
-      bottom side at plan x uniformly spaced in [−h, h] (`h = valley_halfwidth`);
-    - from each peak ring (loops 1, 2, …), seams at plan angles `2πk/n_around`
-      around its centre to where the ray meets the outer loop, keeping the rays
-      that land beyond the valley band (|x| > h + spacing).
+    - `n_valley` valley seams across the outer loop (loop 0), from its top side
+      to its bottom side at x uniformly spaced in [−h, h] + `shift`
+      (`h = valley_halfwidth`; the shift keeps them off the mesh's line x = 0);
+    - from each peak ring (loops 1, 2), `n_per_ring` seams leaving the ring at
+      uniform plan angles in [−sector, sector] degrees from the direction away
+      from the valley, ending at uniformly spaced points of the outer loop's arc
+      beyond the valley band (|x| ≥ h + spacing), matched in angular order.
 
-    Uniform angles: cloths near the corners of the outer loop come out wider.
+    Uniform spacing on both ends: the cloths at the corners of the outer loop
+    come out wider than the others.
     """
     loops = boundary_loops(mesh)
-    op = loops[0].polyline(mesh)
+    if len(loops) != 3:
+        raise JaxgeoError("peaks_layout needs three boundary loops (twin peaks)")
+    outer = loops[0]
+    op = outer.polyline(mesh)
     top, bottom = op[:, 1].max(), op[:, 1].min()
-    xs = np.linspace(-valley_halfwidth, valley_halfwidth, n_valley)
     gap = 2 * valley_halfwidth / max(n_valley - 1, 1)
+    xs = np.linspace(-valley_halfwidth, valley_halfwidth, n_valley) + shift
     la, lb, sa, sb = [], [], [], []
     for x in xs:
-        sa.append(loop_parameter(mesh, loops[0], [x, top, 0.0]))
-        sb.append(loop_parameter(mesh, loops[0], [x, bottom, 0.0]))
+        sa.append(loop_parameter(mesh, outer, [x, top, 0.0]))
+        sb.append(loop_parameter(mesh, outer, [x, bottom, 0.0]))
         la.append(0)
         lb.append(0)
-    angles = 2 * np.pi * np.arange(n_around) / n_around
-    for ring in range(1, len(loops)):
-        side = np.sign(loops[ring].polyline(mesh)[:, 0].mean())
-        ra, rb = _ring_seams(
-            mesh,
-            loops,
-            ring,
-            angles,
-            keep=lambda p, s=side: s * p[0] > valley_halfwidth + gap,
-        )
-        la += [ring] * len(ra)
-        lb += [0] * len(ra)
-        sa += ra
-        sb += rb
+    cum = np.asarray(outer.cumulative(mesh))
+    cum = cum / cum[-1]
+    for ring in (1, 2):
+        rp = loops[ring].polyline(mesh)
+        centre = rp[:-1].mean(axis=0)
+        side = 1.0 if centre[0] > 0 else -1.0
+        ang = np.deg2rad(np.linspace(-sector, sector, n_per_ring))
+        ang = ang if side > 0 else np.pi - ang[::-1]
+        for th in ang:
+            hit = _ray_hit(rp, centre[:2], np.array([math.cos(th), math.sin(th)]))
+            sa.append(loop_parameter(mesh, loops[ring], hit))
+        # outer arc beyond the valley band, through the far side of the loop
+        x_cut = side * (valley_halfwidth + gap + shift * side)
+        s0 = loop_parameter(mesh, outer, [x_cut, bottom, 0.0])
+        s1 = loop_parameter(mesh, outer, [x_cut, top, 0.0])
+        s_far = loop_parameter(mesh, outer, [side * op[:, 0].max() * 2, 0.0, 0.0])
+        span = np.mod(s1 - s0, 1.0)
+        if np.mod(s_far - s0, 1.0) > span:  # the arc s0 -> s1 misses the far side
+            s0, s1, span = s1, s0, 1.0 - span
+        ends = np.mod(s0 + span * np.linspace(0.0, 1.0, n_per_ring + 2)[1:-1], 1.0)
+        # match ring angles to outer points by plan angle around the ring centre
+        pts = np.array([_point_on(op, cum, e) for e in ends])
+        order_o = np.argsort(_unwrap(pts, centre, side))
+        ring_pts = np.array([_point_on(rp, _cum(rp), s) for s in sa[-n_per_ring:]])
+        order_r = np.argsort(_unwrap(ring_pts, centre, side))
+        matched = np.empty(n_per_ring)
+        matched[order_r] = ends[order_o]
+        sb += matched.tolist()
+        la += [ring] * n_per_ring
+        lb += [0] * n_per_ring
     return _layout(loops, la, lb, sa, sb)
+
+
+def _cum(poly: np.ndarray) -> np.ndarray:
+    c = np.concatenate(
+        [[0.0], np.cumsum(np.linalg.norm(np.diff(poly, axis=0), axis=1))]
+    )
+    return c / c[-1]
+
+
+def _point_on(poly: np.ndarray, cum: np.ndarray, s: float) -> np.ndarray:
+    return np.array([np.interp(s, cum, poly[:, k]) for k in range(3)])
+
+
+def _unwrap(pts: np.ndarray, centre: np.ndarray, side: float) -> np.ndarray:
+    """Plan angles around `centre`, measured from the valley direction (−side·x)
+    so they increase without a jump across the far side."""
+    d = pts[:, :2] - centre[:2]
+    return np.mod(np.arctan2(d[:, 1], d[:, 0]) - np.arctan2(0.0, -side), 2 * np.pi)
 
 
 # ----------------------------------------------------------------------- tracing
@@ -306,37 +352,49 @@ def _point_segment(p, a, b):
 
 
 def cloth_widths(
-    points: Float[Array, "N M 3"], cloth_seams: Int[Array, "C S"]
+    points: Float[Array, "N M 3"],
+    pairs: Int[Array, "P 2"],
+    group: Int[Array, " P"],
+    cloth_of_group: Int[Array, " G"],
+    n_cloths: int,
 ) -> Float[Array, " C"]:
     """Width of each cloth: the largest distance from a point of one of its
-    seams to the nearest of its other seams (`cloth_seams` padded with −1)."""
+    seams to the nearest of its other seams.
 
-    def one(ids):
-        valid = ids >= 0
-        pts = points[jnp.maximum(ids, 0)]  # (S, M, 3)
+    `pairs[k] = (i, j)` are the ordered pairs of distinct seams of a cloth,
+    `group[k]` numbers the (cloth, i) they belong to, `cloth_of_group` the cloth
+    of each group (see `_width_index`)."""
 
-        def row(i):
-            def col(j):
-                d = _point_segment(pts[i], pts[j, :-1], pts[j, 1:]).min(axis=1)
-                ok = valid[j] & (i != j)
-                return jnp.where(ok, d, jnp.inf)
+    def one(ij):
+        p, q = points[ij[0]], points[ij[1]]
+        return _point_segment(p, q[:-1], q[1:]).min(axis=1)  # (M,)
 
-            return jax.vmap(col)(jnp.arange(ids.shape[0])).min(axis=0).max()
+    d = jax.vmap(one)(pairs)  # (P, M)
+    n_groups = cloth_of_group.shape[0]
+    near = jax.ops.segment_min(d, group, num_segments=n_groups)  # (G, M)
+    return jax.ops.segment_max(near.max(axis=1), cloth_of_group, num_segments=n_cloths)
 
-        w = jax.vmap(row)(jnp.arange(ids.shape[0]))
-        return jnp.max(jnp.where(valid, w, -jnp.inf))
 
-    return jax.vmap(one)(cloth_seams)
+def _width_index(cloth_seams: list[list[int]]):
+    pairs, group, cloth_of_group = [], [], []
+    for c, ids in enumerate(cloth_seams):
+        for i in ids:
+            g = len(cloth_of_group)
+            cloth_of_group.append(c)
+            for j in ids:
+                if j != i:
+                    pairs.append((i, j))
+                    group.append(g)
+    return (
+        np.asarray(pairs, np.int32).reshape(-1, 2),
+        np.asarray(group, np.int32),
+        np.asarray(cloth_of_group, np.int32),
+    )
 
 
 def _pairs(cloth_seams: list[list[int]]) -> np.ndarray:
     pairs = [c for c in cloth_seams if len(c) == 2]
     return np.asarray(pairs, np.int32).reshape(-1, 2)
-
-
-def _pad(cloth_seams: list[list[int]]) -> np.ndarray:
-    s = max(len(c) for c in cloth_seams)
-    return np.asarray([c + [-1] * (s - len(c)) for c in cloth_seams], np.int32)
 
 
 def objective(
@@ -362,11 +420,11 @@ def objective(
 
 @eqx.filter_jit
 def _value_and_grad(
-    mesh, packed, loop_a, loop_b, x, traced, cloths, pairs, scale, rw, w
+    mesh, packed, loop_a, loop_b, x, traced, index, pairs, scale, rw, w
 ):
     def f(x):
         q = _replay_batch(mesh, packed, loop_a, loop_b, x, traced)
-        widths = cloth_widths(q.points, cloths) * scale
+        widths = cloth_widths(q.points, *index, scale.shape[0]) * scale
         j, terms = objective(q.length, widths, pairs, rw, w)
         return j, (terms, widths, q.length)
 
@@ -396,7 +454,7 @@ class Result:
 class _Evaluator:
     def __init__(self, mesh, layout, cloth_seams, roll_width, weights, scale):
         self.mesh, self.layout, self.rw, self.w = mesh, layout, roll_width, weights
-        self.cloths = jnp.asarray(_pad(cloth_seams))
+        self.index = tuple(jnp.asarray(a) for a in _width_index(cloth_seams))
         self.pairs = jnp.asarray(_pairs(cloth_seams))
         self.scale = jnp.asarray(scale, float)
         self.order = _cyclic_orders(layout, layout.x)
@@ -415,7 +473,7 @@ class _Evaluator:
             jnp.asarray(lay.loop_b),
             jnp.asarray(x),
             paths,
-            self.cloths,
+            self.index,
             self.pairs,
             self.scale,
             self.rw,
@@ -512,6 +570,73 @@ def optimise(
         history,
         cloth_seams,
     )
+
+
+def cut(mesh: Mesh, layout: Layout, options: TraceOptions | None = None):
+    """Trace the seams of `layout` and cut `mesh` along them
+    (`jaxgeo.pattern.cut_mesh`). Returns `(cut_mesh, paths)`."""
+    from .pattern import cut_mesh
+
+    paths, ends = trace_seams(mesh, layout, options)
+    bad = np.flatnonzero(np.asarray(paths.status) != Status.SUCCESS)
+    if bad.size:
+        raise JaxgeoError(f"seams {bad.tolist()} could not be traced")
+    seams = [(unbatch(paths, i), ends[i, 0], ends[i, 1]) for i in range(len(ends))]
+    return cut_mesh(mesh, seams), paths
+
+
+def fit_roll(
+    mesh: Mesh,
+    layout: Layout,
+    roll_width: float,
+    *,
+    rounds: int = 3,
+    steps: int = 25,
+    weights: Weights = Weights(),
+    log: Callable[[str], None] | None = None,
+):
+    """Optimise `layout` until every flattened cloth fits the roll.
+
+    Each round runs `optimise`, cuts and flattens the result
+    (`jaxgeo.pattern.make_pattern`) and rescales each cloth's width measure by
+    flattened/measured width (the 3-D distance between seams misses the bend a
+    cloth takes when flattened), then optimises again from there.
+
+    **Returns:** `(result_of_first_round, layout, pattern, history)` where
+    `history` lists `(J, max flattened width)` per round.
+    """
+    from .pattern import make_pattern
+
+    log = log or (lambda msg: None)
+    cut0, _ = cut(mesh, layout, weights.options)
+    cloth_seams = cut0.cloth_seams()
+    pat = make_pattern(cut0)
+    log(f"start: {cut0.n_cloths} cloths, widest {pat.widths.max():.4g}")
+    scale = np.ones(len(cloth_seams))
+    first, current, history = None, layout, []
+    for r in range(rounds):
+        res = optimise(
+            mesh,
+            current,
+            roll_width,
+            cloth_seams,
+            weights=weights,
+            steps=steps,
+            width_scale=scale,
+            progress=lambda k, j, r=r: log(f"round {r + 1} step {k}: J = {j:.5g}"),
+        )
+        first = first or res
+        c, _ = cut(mesh, res.layout, weights.options)
+        if c.cloth_seams() != cloth_seams:
+            log("the cloth topology changed; keeping the previous layout")
+            break
+        current, pat = res.layout, make_pattern(c)
+        history.append((res.j_end, float(pat.widths.max())))
+        log(f"round {r + 1}: J = {res.j_end:.5g}, widest {pat.widths.max():.4g}")
+        if (pat.widths <= roll_width).all():
+            break
+        scale = scale * pat.widths / res.widths_end
+    return first, current, pat, history
 
 
 def _stderr_progress(step: int, j: float) -> None:  # pragma: no cover
