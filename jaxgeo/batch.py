@@ -19,6 +19,7 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 from jaxtyping import ArrayLike
 
+from ._checks import check_arguments, check_batch_options
 from ._errors import JaxgeoError
 from .geodesic import _solve, _validate_options
 from .locate import DEFAULT_MAX_DISTANCE
@@ -43,10 +44,10 @@ def _check_batch(name: str, p: ArrayLike) -> np.ndarray:
 
 
 @eqx.filter_jit
-def _solve_chunk(mesh, p1, p2, max_distance, weighting, options):
+def _solve_chunk(mesh, p1, p2, max_distance, weighting, options, method):
     def one(a, b):
         # The result leaves as numpy (not differentiable): no replay needed.
-        return _solve(mesh, a, b, max_distance, weighting, options, False)[0]
+        return _solve(mesh, a, b, max_distance, weighting, options, False, method)[0]
 
     return jax.vmap(one)(p1, p2)
 
@@ -64,7 +65,7 @@ def shortest_paths(
     p1: ArrayLike,
     p2: ArrayLike,
     *,
-    method: Literal["laser"] = "laser",
+    method: Literal["laser", "exact"] = "laser",
     candidates: Literal["local", "all"] = "local",
     max_points: int = 1024,
     normals: Weighting = "uniform",
@@ -92,6 +93,8 @@ def shortest_paths(
     if not isinstance(mesh, Mesh):
         raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
     _validate_options(method)
+    check_arguments(mesh, candidates, max_points, normals, max_distance, throw)
+    check_batch_options(chunk_size, shard, progress)
     a, b = _check_batch("p1", p1), _check_batch("p2", p2)
     if a.shape != b.shape:
         raise JaxgeoError(
@@ -115,7 +118,7 @@ def shortest_paths(
         ca, cb = jnp.asarray(a[idx], dtype), jnp.asarray(b[idx], dtype)
         if sharding is not None:
             ca, cb = jax.device_put(ca, sharding), jax.device_put(cb, sharding)
-        paths = _solve_chunk(mesh, ca, cb, max_distance, normals, options)
+        paths = _solve_chunk(mesh, ca, cb, max_distance, normals, options, method)
         pieces.append(jax.tree.map(lambda x, k=stop - start: np.asarray(x)[:k], paths))
         if progress is not None:
             progress(stop, n)

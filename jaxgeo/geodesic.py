@@ -10,7 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._checks import as_endpoint, check_arguments
 from ._errors import JaxgeoError
+from ._exact_method import exact_path
 from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint, locate
 from .mesh import Mesh
 from .normals import Weighting, vertex_normals
@@ -18,9 +20,9 @@ from .path import Path, Status
 from .replay import replay
 from .trace import TraceOptions, trace
 
-Method = Literal["laser"]
+Method = Literal["exact", "laser", "smooth"]
 #: The methods `shortest_path` accepts.
-METHODS: tuple[str, ...] = ("laser",)
+METHODS: tuple[str, ...] = ("laser", "exact", "smooth")
 Endpoint = ArrayLike | SurfacePoint
 
 
@@ -75,6 +77,7 @@ def _solve(
     weighting: str,
     options: TraceOptions,
     differentiable: bool = True,
+    method: str = "laser",
 ) -> tuple[Path, SurfacePoint, SurfacePoint, Float[Array, "2"]]:
     start, d1 = _as_surface_point(mesh, p1)
     end, d2 = _as_surface_point(mesh, p2)
@@ -95,7 +98,14 @@ def _solve(
     # The replay only attaches derivatives: its points equal the traced ones to
     # rounding. Concrete calls outside any transformation cannot be differentiated
     # afterwards, so they skip it.
-    path = replay(mesh, normals, start, end, traced) if differentiable else traced
+    if method == "exact":
+        path = exact_path(mesh, start, end, traced, initial)
+    elif method == "smooth":
+        path = exact_path(mesh, start, end, traced, initial, smooth_normals=normals)
+    elif differentiable:
+        path = replay(mesh, normals, start, end, traced)
+    else:
+        path = traced
     return path, start, end, jnp.stack([d1, d2])
 
 
@@ -118,7 +128,13 @@ def shortest_path(
     - `mesh`: a `Mesh`.
     - `p1`, `p2`: endpoints, each a 3-D point near the surface (it is moved to the
       nearest point of the mesh) or a `SurfacePoint` (face, barycentric).
-    - `method`: `"laser"`, the sliding laser ray of the paper (sections 4–5).
+    - `method`: `"laser"`, the sliding laser ray of the paper (sections 4–5), or
+      `"exact"`, the exact polyhedral geodesic: the laser ray's corridor (and a
+      Dijkstra corridor) straightened and released around vertices until it is
+      locally shortest (`jaxgeo.refine`); its length is differentiable, its points
+      are not; or `"smooth"`, the geodesic of the Phong surface (α = ½) that the
+      vertex normals define, started from the exact path's strip
+      (`jaxgeo.smooth`); points and length differentiable.
     - `candidates`: `"local"` or `"all"` edges per step (see `jaxgeo.trace`).
     - `max_points`: capacity of the path (endpoints included).
     - `normals`: vertex-normal weighting, `"uniform"` = the paper's eq. (8)–(9).
@@ -133,13 +149,22 @@ def shortest_path(
     if not isinstance(mesh, Mesh):
         raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
     _validate_options(method)
+    check_arguments(mesh, candidates, max_points, normals, max_distance, throw)
     concrete = _is_concrete(mesh, p1, p2)
     if concrete:
         _check_point("p1", p1, mesh)
         _check_point("p2", p2, mesh)
+    p1, p2 = as_endpoint(p1, mesh), as_endpoint(p2, mesh)
     options = TraceOptions(candidates=candidates, max_points=max_points)
     path, _, _, dist = _solve(
-        mesh, p1, p2, max_distance, normals, options, differentiable=not concrete
+        mesh,
+        p1,
+        p2,
+        max_distance,
+        normals,
+        options,
+        differentiable=not concrete,
+        method=method,
     )
     if throw and concrete:
         status = Status(int(path.status))
