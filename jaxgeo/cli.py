@@ -245,6 +245,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     v.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     v.set_defaults(func=_cmd_validate)
+
+    from ._pattern_cli import add_pattern_parser
+
+    add_pattern_parser(sub)
     return parser
 
 
