@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,6 +31,7 @@ import pytest
 import jaxgeo as jg
 from jaxgeo import surfaces
 from jaxgeo.path import EDGE, VERTEX
+from jaxgeo.replay import replay
 
 N_AROUND, N_RINGS = 24, 10  # 480 faces
 MAX_POINTS = 64
@@ -324,25 +326,25 @@ def test_gradient_finite_through_a_vertex_eager():
 
 
 def test_incomplete_path_replays_its_last_crossing():
-    """A path that stops early (the projection of the chord leaves the cone tent
-    across its inner boundary: NO_CROSSING) ends at its last crossing, not at
-    point 2, and still has finite derivatives."""
-    mesh = ring_mesh("cone")
+    """A path that stopped early (here a complete one cut to 5 points and marked
+    MAX_STEPS) ends at its last crossing, not at point 2: the replay re-solves
+    that crossing instead of putting point 2 there."""
+    mesh = ring_mesh("catenoid")
+    (f1, f2), (b1, b2), _ = endpoint_pair("catenoid")
     v0 = np.asarray(mesh.vertices)
-    p1, p2 = v0[np.asarray(mesh.faces)[[268, 448]]].mean(axis=1)
-    length, path, grads = grad_points(v0, mesh, p1, p2)
-    c = int(path.count)
-    assert int(path.status) == jg.Status.NO_CROSSING and c > 2
-    kind, edge, u = (int(a[c - 1]) for a in (path.kinds, path.elements, path.params))
-    assert kind == EDGE
-    e0, e1 = np.asarray(mesh.edges)[edge]
-    u = float(path.params[c - 1])
-    np.testing.assert_allclose(
-        path.points[c - 1], (1 - u) * v0[e0] + u * v0[e1], atol=1e-14
+    path = bary_jacobians(v0, mesh, f1, b1, f2, b2)[1]
+    cut = eqx.tree_at(
+        lambda p: (p.count, p.status),
+        path,
+        (jnp.asarray(5, jnp.int32), jnp.asarray(jg.Status.MAX_STEPS, jnp.int32)),
     )
-    segments = np.diff(np.asarray(path.points)[:c], axis=0)
-    np.testing.assert_allclose(length, np.linalg.norm(segments, axis=1).sum())
-    assert all(np.isfinite(g).all() for g in grads)
+    start = jg.SurfacePoint(jnp.asarray(f1), jnp.asarray(b1))
+    end = jg.SurfacePoint(jnp.asarray(f2), jnp.asarray(b2))
+    normals = jg.vertex_normals(mesh.vertices, mesh.faces)
+    replayed = jax.jit(replay)(mesh, normals, start, end, cut)
+    np.testing.assert_allclose(replayed.points[:5], path.points[:5], atol=1e-12)
+    segments = np.diff(np.asarray(path.points)[:5], axis=0)
+    np.testing.assert_allclose(replayed.length, np.linalg.norm(segments, axis=1).sum())
 
 
 def test_gradient_finite_for_coincident_endpoints():
