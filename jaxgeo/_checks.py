@@ -109,3 +109,13 @@ def check_batch_options(
     _check_bool("shard", shard)
     if progress is not None and not callable(progress):
         raise JaxgeoError(f"progress must be callable or None, got {progress!r}")
+
+
+def as_endpoint(p: Any, mesh) -> Any:
+    """A 3-D endpoint as a JAX array of the mesh's dtype (a `SurfacePoint` as it
+    is). Lists, tuples and integer arrays would otherwise reach the jit-compiled
+    solver as static Python values or a new dtype, and compile it again for every
+    call."""
+    if hasattr(p, "face") and hasattr(p, "bary"):  # a SurfacePoint
+        return p
+    return jax.numpy.asarray(p, mesh.vertices.dtype)

@@ -11,6 +11,17 @@ a mesh size and `max_points` and runs under `jax.vmap`. It makes discrete choice
 (which edge is next), so it is not differentiated; `jaxgeo.replay` recomputes the
 crossings differentiably on the edge sequence it found.
 
+Boundaries: on an open mesh the chord's projection can leave the mesh (the chord
+passes over a hole or outside a free edge), and then no crossing lies ahead. If the
+current point is on the boundary, the path slides along it instead: to the end of
+a boundary edge through the current point whose direction is closest to the
+chord's, provided it is ahead (positive cosine) and not the vertex the path just
+left. The slid-to vertex is a `VERTEX` point and the laser ray resumes from it, so
+around a hole the path hugs the hole's rim, as a geodesic does. Only when no
+boundary edge points ahead (or the point is inside the mesh) does the trace stop
+with `Status.NO_CROSSING`. Slides cannot hang the loop: every step appends a point
+and the loop ends at `max_points` (`Status.MAX_STEPS`).
+
 Candidates:
 
 - `"local"`: the edges of the faces around P (the face it is in; the two faces of
