@@ -52,6 +52,15 @@ def _solve_chunk(mesh, p1, p2, max_distance, weighting, options, method):
     return jax.vmap(one)(p1, p2)
 
 
+def _gather(x) -> np.ndarray:
+    """A (possibly globally sharded) array as numpy on this process."""
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+    return np.asarray(x)
+
+
 def _device_sharding() -> NamedSharding | None:
     devices = jax.devices()
     if len(devices) < 2:
@@ -119,7 +128,7 @@ def shortest_paths(
         if sharding is not None:
             ca, cb = jax.device_put(ca, sharding), jax.device_put(cb, sharding)
         paths = _solve_chunk(mesh, ca, cb, max_distance, normals, options, method)
-        pieces.append(jax.tree.map(lambda x, k=stop - start: np.asarray(x)[:k], paths))
+        pieces.append(jax.tree.map(lambda x, k=stop - start: _gather(x)[:k], paths))
         if progress is not None:
             progress(stop, n)
     out = jax.tree.map(lambda *xs: np.concatenate(xs), *pieces)
