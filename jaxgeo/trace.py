@@ -121,6 +121,13 @@ def trace(
     dtype = mesh.vertices.dtype
     m = options.max_points
     tol = param_tolerance(dtype)
+    # A crossing is ahead when its chord parameter t exceeds the rounding error of
+    # t after the Newton polish (a few eps): 1e-9 in float64 (as param_tolerance),
+    # 8 eps ≈ 1e-6 in float32. Not param_tolerance in float32 (1e-4): near a vertex
+    # with a fan of edges the next crossing can be 1e-4 of the chord away, and
+    # float32 traces stopped there with NO_CROSSING (found by the float32 runs of
+    # docs/accuracy.md on the twin-peak tent).
+    t_ahead = tol if dtype == jnp.float64 else 8 * eps_of(dtype)
     verts, edges = mesh.vertices, mesh.edges
     p1, p2 = start.position(mesh), end.position(mesh)
     kind1, idx1 = snap(mesh, start, tol)
@@ -196,7 +203,7 @@ def trace(
             normals[e1],
             max_steps=options.newton_steps,
         )
-        ok = cr.valid & (cr.t > tol) & live[:, None]
+        ok = cr.valid & (cr.t > t_ahead) & live[:, None]
         dist = jnp.linalg.norm(cr.point - pos, axis=-1)
         dist = jnp.where(ok, dist, jnp.inf)
         best = jnp.argmin(dist)
