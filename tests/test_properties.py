@@ -147,7 +147,9 @@ def faces_containing(v, faces, p, tol) -> set[int]:
     rhs = np.stack([np.sum(e1 * d, 1), np.sum(e2 * d, 1)], 1)
     st_ = np.linalg.solve(g, rhs[..., None])[..., 0]
     bary = np.column_stack([1 - st_.sum(1), st_])
-    foot = np.einsum("fi,fij->fj", np.clip(bary, 0, 1), tri)
+    clipped = np.clip(bary, 0, 1)
+    # renormalised: a clipped sum ≠ 1 would scale the foot by the position's size
+    foot = np.einsum("fi,fij->fj", clipped / clipped.sum(1, keepdims=True), tri)
     close = np.linalg.norm(foot - p, axis=1) <= tol
     return set(np.flatnonzero(close & (bary.min(1) >= -1e-6)).tolist())
 
