@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 import numpy as np
@@ -256,6 +257,13 @@ def main(argv: list[str] | None = None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
+    # Compiled solvers are cached on disk: the second run of a command skips the
+    # JIT compilation that dominates a short run.
+    cache = os.environ.get(
+        "JAX_COMPILATION_CACHE_DIR",
+        os.path.join(os.path.expanduser("~"), ".cache", "jaxgeo", "xla"),
+    )
+    jax.config.update("jax_compilation_cache_dir", cache)
     from ._errors import JaxgeoError
 
     args = build_parser().parse_args(argv)

@@ -1,12 +1,20 @@
+import os
+from pathlib import Path
+
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
+# A persistent XLA compilation cache shared by the test process and the processes
+# it starts (notebook kernels, the sharding subprocess): JIT compiles dominate the
+# suite's time, and a second compile of the same function then costs a file read.
+_CACHE = str(Path(__file__).resolve().parent.parent / ".jax_cache")
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", _CACHE)
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+
 # Hypothesis profiles for tests/test_properties.py: "ci" (default) keeps the suite
 # inside the CI budget (≥ 200 generated cases in all); "long" is for runs by hand:
 #   HYPOTHESIS_PROFILE=long pytest tests/test_properties.py
-import os  # noqa: E402
-
 from hypothesis import settings  # noqa: E402
 
 settings.register_profile("ci", max_examples=90, deadline=None, derandomize=True)
