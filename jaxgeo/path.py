@@ -37,8 +37,8 @@ _MESSAGES = {
     Status.SUCCESS: "point 2 reached",
     Status.MAX_STEPS: "out of steps: the path needs more than max_points points "
     "(raise max_points)",
-    Status.NO_CROSSING: "no crossing found ahead of the current point (the "
-    "projection of the chord leaves the mesh, e.g. across its boundary)",
+    Status.NO_CROSSING: "no crossing found ahead of the current point, and no "
+    "boundary edge to slide along",
     Status.FAR_FROM_SURFACE: "an endpoint is too far from the surface",
     Status.DIFFERENT_COMPONENTS: "the endpoints lie on different connected "
     "components of the mesh",

@@ -148,19 +148,26 @@ def trace(
         star_edges = jnp.where(star[:, None] >= 0, mesh.face_edges[star], -1)
         return jnp.any(cand[:, None] == star_edges.reshape(1, -1), axis=1)
 
-    def candidates(kind, idx):
+    def touches(cand, kind, idx):
+        """Candidate edges that are the element (kind, idx) or pass through it."""
+        return jnp.where(
+            kind == EDGE,
+            cand == idx,
+            (kind == VERTEX) & jnp.any(edges[cand] == idx, axis=1),
+        )
+
+    def candidates(kind, idx, prev_kind, prev_idx):
         if options.candidates == "local":
             star = star_faces(mesh, kind, idx)
             cand = mesh.face_edges[jnp.maximum(star, 0)].reshape(-1)
             live = jnp.repeat(star >= 0, 3)
         else:
             cand, live = all_edges, jnp.ones(all_edges.shape, bool)
-        through_p = jnp.where(
-            kind == EDGE,
-            cand == idx,
-            (kind == VERTEX) & jnp.any(edges[cand] == idx, axis=1),
-        )
-        return cand, live & ~through_p
+        # Never step back onto the previous point's edge or through its vertex: on
+        # a surface of revolution a chord through the axis has normal projections
+        # on both sides, and a path bounced between two ring edges forever.
+        behind = touches(cand, prev_kind, prev_idx)
+        return cand, live & ~touches(cand, kind, idx) & ~behind
 
     def boundary_slide(pos, kind, idx, star, came_from):
         """The boundary vertex to slide to when no crossing lies ahead: among the
@@ -188,11 +195,11 @@ def trace(
         return jnp.any(usable), w[best].astype(jnp.int32)
 
     def step(state):
-        (pos, kind, idx, came_from, count, status) = state[:6]
-        (pts, kinds, elems, params, branch) = state[6:]
+        (pos, kind, idx, came_from, prev_kind, prev_idx, count, status) = state[:8]
+        (pts, kinds, elems, params, branch) = state[8:]
         star = star_faces(mesh, kind, idx)
         reached = jnp.any((star[:, None] == target[None, :]) & (star[:, None] >= 0))
-        cand, live = candidates(kind, idx)
+        cand, live = candidates(kind, idx, prev_kind, prev_idx)
         e0, e1 = edges[cand, 0], edges[cand, 1]
         cr = solve_edges(
             pos,
@@ -259,6 +266,8 @@ def trace(
             jnp.where(moving, new_idx, idx),
             # the vertex the path leaves (a slide may not return to it at once)
             jnp.where(moving, jnp.where(kind == VERTEX, idx, -1), came_from),
+            jnp.where(moving, kind, prev_kind),
+            jnp.where(moving, idx, prev_idx),
             count + append.astype(jnp.int32),
             new_status,
             pts,
@@ -278,6 +287,8 @@ def trace(
         kind1,
         idx1,
         jnp.asarray(-1, jnp.int32),
+        jnp.asarray(FACE, jnp.int32),  # no previous point: a face touches no edge
+        jnp.asarray(-1, jnp.int32),
         jnp.asarray(1, jnp.int32),
         jnp.asarray(initial_status, jnp.int32),
         pts,
@@ -286,8 +297,8 @@ def trace(
         params,
         branch,
     )
-    state = jax.lax.while_loop(lambda s: s[5] < 0, step, state)
-    _, _, _, _, count, status, pts, kinds, elems, params, branch = state
+    state = jax.lax.while_loop(lambda s: s[7] < 0, step, state)
+    count, status, pts, kinds, elems, params, branch = state[6:]
     pts = pad_tail(pts, count)
     return Path(
         points=pts,

@@ -98,3 +98,19 @@ def test_sharded_batch_equals_unsharded():
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert "sharded ok" in out.stdout
+
+
+def test_symmetric_catenoid_pair_through_the_axis_completes():
+    """Endpoints point-symmetric about the catenoid's centre: the chord runs through
+    the axis, where every normal line meets it. The trace once bounced between two
+    ring edges until MAX_STEPS (and held up its whole vmapped chunk)."""
+    from jaxgeo import surfaces
+
+    v, f = surfaces.catenoid()
+    mesh = jg.Mesh(v, f)
+    low = np.flatnonzero(np.isclose(v[:, 2], v[:, 2].min()))
+    a = v[low[7]]
+    b = a * np.array([-1.0, -1.0, -1.0])  # on the upper ring, opposite side
+    path = jg.shortest_path(mesh, a, b)
+    assert int(path.status) == jg.Status.SUCCESS
+    assert int(path.count) < 4 * np.sqrt(mesh.n_faces)
