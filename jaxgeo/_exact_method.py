@@ -143,12 +143,12 @@ def _refine_numpy(treedef, cap, dtype, smooth, leaves, start, end, laser, initia
             out["status"] = np.int32(Status.MAX_STEPS)
             return out
         out.update(_pad_structure(path.structure, np.asarray(mesh.faces[0]), cap))
-    except JaxgeoError:
+        ok = bool(np.asarray(path.converged))
+        if smooth and ok:
+            path, n, ok = _smooth_strip(mesh, start, end, path, cap)
+    except Exception:  # noqa: BLE001 - a callback must return, never raise
         out["status"] = np.int32(Status.REFINE_FAILED)
         return out
-    ok = bool(np.asarray(path.converged))
-    if smooth and ok:
-        path, n, ok = _smooth_strip(mesh, start, end, path, cap)
     for name in ("points", "kinds", "elements", "params"):
         a = np.asarray(getattr(path, name))[:n]
         out[name][:n] = a

@@ -523,10 +523,19 @@ def exact_geodesic(
     start = EndPoint(topo, start_face, start_bary)
     end = EndPoint(topo, end_face, end_bary)
     todo = [list(c) for c in (corridors or [])]
+    failure = None
     if dijkstra:
         for path in topo.vertex_paths(start, end, n_via):
-            todo.append(topo.vertex_path_corridor(path, start, end))
+            # A vertex path next to an endpoint that lies on an edge or at a vertex
+            # can fail to give a corridor (known limitation of
+            # `vertex_path_corridor`); the other corridors still count.
+            try:
+                todo.append(topo.vertex_path_corridor(path, start, end))
+            except (JaxgeoError, IndexError) as e:
+                failure = e
     if not todo:
+        if failure is not None:
+            raise JaxgeoError(f"no starting corridor: {failure}") from failure
         raise JaxgeoError("exact_geodesic needs a corridor or dijkstra=True")
     results = [_refine(topo, c, start, end, max_iter) for c in todo]
     results.sort(key=lambda r: r[0].length)
