@@ -267,6 +267,8 @@ def main(argv=None) -> int:
         "",
         "## Paths (median per query after warm-up; ratios from the same run)",
         "",
+        "Peak RSS is the process's peak so far (meshes run in increasing size).",
+        "",
         markdown(rows),
         "",
         "## System (16) on every edge of a 20k-face catenoid",
