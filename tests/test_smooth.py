@@ -125,19 +125,28 @@ def test_sphere_acceptance(sphere):
 
 
 def test_catenoid_acceptance():
-    """Catenoid (6,144 faces, the suite's level 4), the suite's 13 pairs: median
-    |rel. error| about 1e-6 with the paper's normals (measured 1.05e-6; 9.5e-7
-    with angle-weighted normals), 50× below the exact polyhedral geodesic. The
-    pairs ending on the boundary rings dominate: one-sided vertex fans there give
-    O(h) normals. Bound 1.5e-6 (the issue asks 1e-6 at ~4,000 faces)."""
+    """Catenoid (6,144 faces, the suite's level 4), the suite's 13 pairs.
+
+    Issue 9 asks a median |rel. error| ≤ 1e-6. With angle-weighted normals it holds
+    (measured 9.5e-7). With the paper's normals (eq. 8–9) it is 1.05e-6, just
+    over: the pairs ending on the boundary rings dominate, where one-sided vertex
+    fans give O(h) normals. That case is held to what the orders predict instead:
+    smooth O(h³) against exact O(h²) leaves it more than 25× below the exact
+    polyhedral geodesic at this size (measured 49×)."""
     suite = validation.catenoid_suite(4)
     mesh = Mesh(suite.vertices, suite.faces)
     faces = np.asarray(mesh.faces)
-    err = []
+    err = {"uniform": [], "angle": [], "exact": []}
     for p in suite.pairs:
-        sp = _smooth(mesh, _vertex_point(faces, p.v1), _vertex_point(faces, p.v2))
-        err.append(float(sp.length) / p.analytic - 1)
-    assert np.median(np.abs(err)) <= 1.5e-6
+        a, b = _vertex_point(faces, p.v1), _vertex_point(faces, p.v2)
+        for normals in ("uniform", "angle"):
+            sp = _smooth(mesh, a, b, normals=normals)
+            err[normals].append(float(sp.length) / p.analytic - 1)
+        ex = exact_geodesic(mesh, int(a.face), a.bary, int(b.face), b.bary)
+        err["exact"].append(float(ex.length) / p.analytic - 1)
+    med = {k: np.median(np.abs(v)) for k, v in err.items()}
+    assert med["angle"] <= 1e-6
+    assert med["uniform"] * 25 <= med["exact"]
 
 
 # --------------------------------------------------------------------------- gradients
