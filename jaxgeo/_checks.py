@@ -16,6 +16,7 @@ import jax
 import numpy as np
 
 from ._errors import JaxgeoError
+from .locate import SurfacePoint
 
 #: The vertex-normal weightings of `jaxgeo.normals.vertex_normals`.
 WEIGHTINGS = ("uniform", "area", "angle")
@@ -23,7 +24,8 @@ WEIGHTINGS = ("uniform", "area", "angle")
 CANDIDATES = ("local", "all")
 
 
-def _traced(x: Any) -> bool:
+def is_traced(x: Any) -> bool:
+    """Whether any leaf of `x` is a tracer (inside `jit`, `vmap`, `grad`, ...)."""
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(x))
 
 
@@ -48,7 +50,7 @@ def check_mesh_vertices(mesh) -> None:
     accept tracers), so a NaN or a wrong dtype can reach the solver that way; a NaN
     vertex would otherwise give NaN crossings or a wrong nearest face."""
     v = mesh.vertices
-    if _traced(v):
+    if is_traced(v):
         return
     v = np.asarray(v)
     if v.dtype not in (np.float32, np.float64):
@@ -87,7 +89,7 @@ def check_arguments(
     if not isinstance(normals, str) or normals not in WEIGHTINGS:
         raise JaxgeoError(f"normals must be one of {WEIGHTINGS}, not {normals!r}")
     _check_int("max_points", max_points, 2)
-    if not _traced(max_distance):
+    if not is_traced(max_distance):
         d = np.asarray(max_distance)
         if d.shape != () or d.dtype.kind not in "fiu" or d.dtype == bool:
             raise JaxgeoError(
@@ -119,3 +121,29 @@ def as_endpoint(p: Any, mesh) -> Any:
     if hasattr(p, "face") and hasattr(p, "bary"):  # a SurfacePoint
         return p
     return jax.numpy.asarray(p, mesh.vertices.dtype)
+
+
+def check_point(name: str, p: Any, mesh) -> None:
+    """Eager checks of an endpoint given as a 3-D point or a SurfacePoint."""
+    if isinstance(p, SurfacePoint):
+        face, bary = np.asarray(p.face), np.asarray(p.bary)
+        if face.shape != () or face.dtype.kind not in "iu":
+            raise JaxgeoError(f"{name}.face must be an integer scalar, got {face!r}")
+        if not 0 <= int(face) < mesh.n_faces:
+            raise JaxgeoError(
+                f"{name}.face {int(face)} is out of range [0, {mesh.n_faces})"
+            )
+        if bary.shape != (3,) or not np.isfinite(bary).all():
+            raise JaxgeoError(f"{name}.bary must be 3 finite numbers, got {bary!r}")
+        if (bary < -1e-9).any() or abs(bary.sum() - 1) > 1e-6:
+            raise JaxgeoError(
+                f"{name}.bary must be non-negative and sum to 1, got {bary!r}"
+            )
+        return
+    a = np.asarray(p)
+    if a.dtype.kind not in "fiu":
+        raise JaxgeoError(f"{name} must be a real 3-D point, got dtype {a.dtype}")
+    if a.shape != (3,):
+        raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
+    if not np.isfinite(a).all():
+        raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")

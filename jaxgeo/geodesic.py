@@ -7,10 +7,9 @@ from typing import Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._checks import as_endpoint, check_arguments
+from ._checks import as_endpoint, check_arguments, check_point, is_traced
 from ._errors import JaxgeoError
 from ._exact_method import exact_path
 from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint, locate
@@ -24,36 +23,6 @@ Method = Literal["exact", "laser", "smooth"]
 #: The methods `shortest_path` accepts.
 METHODS: tuple[str, ...] = ("laser", "exact", "smooth")
 Endpoint = ArrayLike | SurfacePoint
-
-
-def _is_concrete(*xs) -> bool:
-    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(xs))
-
-
-def _check_point(name: str, p, mesh: Mesh) -> None:
-    """Eager checks of an endpoint given as a 3-D point or a SurfacePoint."""
-    if isinstance(p, SurfacePoint):
-        face, bary = np.asarray(p.face), np.asarray(p.bary)
-        if face.shape != () or face.dtype.kind not in "iu":
-            raise JaxgeoError(f"{name}.face must be an integer scalar, got {face!r}")
-        if not 0 <= int(face) < mesh.n_faces:
-            raise JaxgeoError(
-                f"{name}.face {int(face)} is out of range [0, {mesh.n_faces})"
-            )
-        if bary.shape != (3,) or not np.isfinite(bary).all():
-            raise JaxgeoError(f"{name}.bary must be 3 finite numbers, got {bary!r}")
-        if (bary < -1e-9).any() or abs(bary.sum() - 1) > 1e-6:
-            raise JaxgeoError(
-                f"{name}.bary must be non-negative and sum to 1, got {bary!r}"
-            )
-        return
-    a = np.asarray(p)
-    if a.dtype.kind not in "fiu":
-        raise JaxgeoError(f"{name} must be a real 3-D point, got dtype {a.dtype}")
-    if a.shape != (3,):
-        raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
-    if not np.isfinite(a).all():
-        raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")
 
 
 def _validate_options(method: str) -> None:
@@ -150,10 +119,10 @@ def shortest_path(
         raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
     _validate_options(method)
     check_arguments(mesh, candidates, max_points, normals, max_distance, throw)
-    concrete = _is_concrete(mesh, p1, p2)
+    concrete = not is_traced((mesh, p1, p2))
     if concrete:
-        _check_point("p1", p1, mesh)
-        _check_point("p2", p2, mesh)
+        check_point("p1", p1, mesh)
+        check_point("p2", p2, mesh)
     p1, p2 = as_endpoint(p1, mesh), as_endpoint(p2, mesh)
     options = TraceOptions(candidates=candidates, max_points=max_points)
     path, _, _, dist = _solve(
