@@ -147,3 +147,18 @@ def check_point(name: str, p: Any, mesh) -> None:
         raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
     if not np.isfinite(a).all():
         raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")
+
+
+def check_point_batch(name: str, p: Any) -> np.ndarray:
+    """Eager checks of a batch of 3-D endpoints, `(N, 3)`; returns it as numpy."""
+    a = np.asarray(p)
+    if a.dtype.kind not in "fiu":
+        raise JaxgeoError(f"{name} must be real 3-D points, got dtype {a.dtype}")
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise JaxgeoError(f"{name} must have shape (N, 3), got {a.shape}")
+    bad = ~np.isfinite(a).all(axis=1)
+    if bad.any():
+        raise JaxgeoError(
+            f"{name} has NaN or infinite coordinates in rows {np.flatnonzero(bad)[:10]}"
+        )
+    return a

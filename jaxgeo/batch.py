@@ -19,7 +19,7 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 from jaxtyping import ArrayLike
 
-from ._checks import check_arguments, check_batch_options
+from ._checks import check_arguments, check_batch_options, check_point_batch
 from ._errors import JaxgeoError
 from .geodesic import _solve, _validate_options
 from .locate import DEFAULT_MAX_DISTANCE
@@ -27,20 +27,6 @@ from .mesh import Mesh
 from .normals import Weighting
 from .path import Path, Status
 from .trace import TraceOptions
-
-
-def _check_batch(name: str, p: ArrayLike) -> np.ndarray:
-    a = np.asarray(p)
-    if a.dtype.kind not in "fiu":
-        raise JaxgeoError(f"{name} must be real 3-D points, got dtype {a.dtype}")
-    if a.ndim != 2 or a.shape[1] != 3:
-        raise JaxgeoError(f"{name} must have shape (N, 3), got {a.shape}")
-    bad = ~np.isfinite(a).all(axis=1)
-    if bad.any():
-        raise JaxgeoError(
-            f"{name} has NaN or infinite coordinates in rows {np.flatnonzero(bad)[:10]}"
-        )
-    return a
 
 
 @eqx.filter_jit
@@ -104,7 +90,7 @@ def shortest_paths(
     _validate_options(method)
     check_arguments(mesh, candidates, max_points, normals, max_distance, throw)
     check_batch_options(chunk_size, shard, progress)
-    a, b = _check_batch("p1", p1), _check_batch("p2", p2)
+    a, b = check_point_batch("p1", p1), check_point_batch("p2", p2)
     if a.shape != b.shape:
         raise JaxgeoError(
             f"p1 and p2 must have the same shape, got {a.shape} and {b.shape}"
