@@ -164,6 +164,19 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_solver_options(parser: argparse.ArgumentParser) -> None:
+    from .geodesic import METHODS
+
+    parser.add_argument(
+        "--method",
+        choices=METHODS,
+        default="laser",
+        help="laser (the paper's method, default), exact (polyhedral geodesic) or "
+        "smooth (geodesic of the Phong surface)",
+    )
+    parser.add_argument("--candidates", choices=("local", "all"), default="local")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="jaxgeo", description="Differentiable geodesics on triangle meshes."
@@ -180,8 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--to", nargs=3, type=float, metavar=("X", "Y", "Z"))
     p.add_argument("--format", choices=("json", "csv", "obj"), default="json")
     p.add_argument("--output", "-o", help="write the polyline here (default stdout)")
-    p.add_argument("--method", default="laser", help="laser (the paper's method)")
-    p.add_argument("--candidates", choices=("local", "all"), default="local")
+    _add_solver_options(p)
     p.set_defaults(func=_cmd_path)
 
     b = sub.add_parser(
@@ -194,8 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("mesh", help="mesh file (OBJ, PLY, STL, OFF, ...)")
     b.add_argument("pairs", help="CSV file with rows x1,y1,z1,x2,y2,z2")
     b.add_argument("--output", "-o", help="write the CSV here (default stdout)")
-    b.add_argument("--method", default="laser")
-    b.add_argument("--candidates", choices=("local", "all"), default="local")
+    _add_solver_options(b)
     b.add_argument("--chunk-size", type=int, default=256)
     b.set_defaults(func=_cmd_paths)
 
