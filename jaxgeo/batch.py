@@ -21,7 +21,7 @@ from jaxtyping import ArrayLike
 
 from ._checks import check_arguments, check_batch_options, check_point_batch
 from ._errors import JaxgeoError
-from .geodesic import _solve, _validate_options
+from .geodesic import Method, _solve, _validate_options
 from .locate import DEFAULT_MAX_DISTANCE
 from .mesh import Mesh
 from .normals import Weighting
@@ -60,7 +60,7 @@ def shortest_paths(
     p1: ArrayLike,
     p2: ArrayLike,
     *,
-    method: Literal["laser", "exact"] = "laser",
+    method: Method = "laser",
     candidates: Literal["local", "all"] = "local",
     max_points: int = 1024,
     normals: Weighting = "uniform",
