@@ -24,10 +24,10 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
+from ._linear import Inverse3
 from ._numerics import eps_of
 
 
@@ -112,7 +112,7 @@ def _t_zeta(u, a, d, x1, dx, n1, dn):
 
 def _newton(dtype) -> optx.Newton:
     tol = 1e-12 if dtype == jnp.float64 else 1e-5
-    return optx.Newton(rtol=tol, atol=tol, linear_solver=lx.LU())
+    return optx.Newton(rtol=tol, atol=tol, linear_solver=Inverse3())
 
 
 def param_tolerance(dtype) -> float:
@@ -220,7 +220,7 @@ def solve_crossing(
         args=(inner, jnp.asarray(active), y0),
         max_steps=max_steps,
         throw=False,
-        adjoint=optx.ImplicitAdjoint(linear_solver=lx.LU()),
+        adjoint=optx.ImplicitAdjoint(linear_solver=Inverse3()),
     )
     return sol.value, sol.result == optx.RESULTS.successful
 
