@@ -78,28 +78,104 @@ def _closest_on_triangle(p, a, b, c):
     return jnp.clip(bary, 0.0, 1.0)
 
 
-def locate(
-    mesh: Mesh, point: Float[Array, "3"]
-) -> tuple[SurfacePoint, Float[Array, ""]]:
-    """The nearest point of the mesh to `point` and its distance.
+#: Faces whose exact nearest point is computed per query. Only faces whose
+#: bounding sphere reaches within the distance of a first guess can be nearest; on
+#: a mesh that resolves its surface those are a few rings of faces around the point.
+_CANDIDATES = 64
 
-    Brute force over all faces (O(F), jit- and vmap-friendly). Returns
-    `(SurfacePoint, distance)`; the caller decides whether the distance is too far
-    (see `shortest_path`).
-    """
-    tri = mesh.vertices[mesh.faces]  # (F, 3, 3)
+
+def _nearest_of(point, tri, faces):
+    """The nearest of the triangles `tri[faces]`: `(face, bary, squared distance)`,
+    ties to the lowest face id (as a brute-force argmin over all faces)."""
+    t = tri[faces]
     bary = jax.vmap(_closest_on_triangle, in_axes=(None, 0, 0, 0))(
-        point, tri[:, 0], tri[:, 1], tri[:, 2]
+        point, t[:, 0], t[:, 1], t[:, 2]
     )
     bary = bary / jnp.sum(bary, axis=1, keepdims=True)
-    closest = jnp.einsum("fi,fij->fj", bary, tri)
+    closest = jnp.einsum("fi,fij->fj", bary, t)
     dist2 = jnp.sum((closest - point) ** 2, axis=1)
     # A NaN distance (a NaN vertex, e.g. from `Mesh.with_vertices`, or a NaN point)
     # must never win the argmin (jnp.argmin returns the first NaN): it counts as
     # infinitely far, so a NaN point is FAR_FROM_SURFACE, not a point of face 0.
     dist2 = jnp.where(jnp.isnan(dist2), jnp.inf, dist2)
-    face = jnp.argmin(dist2)
-    return SurfacePoint(face, bary[face]), jnp.sqrt(dist2[face])
+    tied = dist2 == jnp.min(dist2)
+    k = jnp.argmin(jnp.where(tied, faces, jnp.iinfo(faces.dtype).max))
+    return faces[k], bary[k], dist2[k]
+
+
+def locate(
+    mesh: Mesh, point: Float[Array, "3"]
+) -> tuple[SurfacePoint, Float[Array, ""]]:
+    """The nearest point of the mesh to `point` and its distance.
+
+    Exact (the nearest distance a brute force over all faces finds; among faces
+    tied to rounding, the lowest id) and jit- and vmap-friendly. Each face has a bounding sphere (centroid,
+    radius r). The face of the nearest centroid gives a first distance d; a face
+    whose centroid is farther than d + r cannot be nearer, so the exact nearest
+    point is computed only on the faces within reach (at most `_CANDIDATES`; when
+    more are, e.g. for a point far from the surface, on all faces). Returns
+    `(SurfacePoint, distance)`; the caller decides whether the distance is too far
+    (see `shortest_path`).
+    """
+    tri = mesh.vertices[mesh.faces]  # (F, 3, 3)
+    face = _nearest_face(jax.lax.stop_gradient(point), jax.lax.stop_gradient(tri))
+    # The search is a discrete choice; the answer is differentiable in the point
+    # and the vertices through the nearest point of the chosen face.
+    _, bary, dist2 = _nearest_of(point, tri, face[None])
+    return SurfacePoint(face, bary), jnp.sqrt(dist2)
+
+
+def _nearest_face(point, tri) -> Int[Array, ""]:
+    all_faces = jnp.arange(tri.shape[0], dtype=jnp.int32)
+    if tri.shape[0] <= _CANDIDATES:
+        return _nearest_of(point, tri, all_faces)[0]
+    centre = jnp.mean(tri, axis=1)
+    radius = jnp.max(jnp.linalg.norm(tri - centre[:, None], axis=-1), axis=1)
+    # |p − c|² expanded: under vmap the p·c term is one matrix product. Its
+    # rounding, ≤ a few eps·(|p|² + |c|²), is covered by `slack`.
+    cc = jnp.sum(centre * centre, axis=1)
+    pp = jnp.dot(point, point)
+    d2c = jnp.maximum(pp - 2 * (centre @ point) + cc, 0.0)
+    d2c = jnp.where(jnp.isnan(d2c), jnp.inf, d2c)
+    first = jnp.argmin(d2c).astype(jnp.int32)
+    _, _, d2_first = _nearest_of(point, tri, first[None])
+    reach = jnp.sqrt(d2_first) + radius
+    slack = 64 * jnp.finfo(tri.dtype).eps * (pp + cc + reach * reach)
+    near = d2c <= reach * reach + slack
+    (cand,) = jnp.nonzero(near, size=_CANDIDATES, fill_value=first)
+    face, _, dist2 = _nearest_of(point, tri, cand.astype(jnp.int32))
+    pruned = jnp.sum(near) <= _CANDIDATES
+    return _search_blocks(point, tri, pruned, face, dist2)
+
+
+#: Faces per block of the full search.
+_BLOCK = 4096
+
+
+def _search_blocks(point, tri, done, face, dist2):
+    """Where not `done`, the nearest face over all faces, a block at a time.
+
+    A while loop over blocks, not `lax.cond`: under vmap a cond runs both branches
+    for every lane, and a loop-invariant full search inside a loop is hoisted out
+    of it by XLA (and run unconditionally). Indexing by the loop counter keeps the
+    work inside, so it costs nothing when every lane is `done`."""
+    n = tri.shape[0]
+    n_blocks = -(-n // _BLOCK)
+    block = jnp.arange(min(_BLOCK, n), dtype=face.dtype)
+
+    def body(state):
+        i, face, dist2 = state
+        ids = jnp.minimum(i * block.shape[0] + block, n - 1)
+        f, _, d2 = _nearest_of(point, tri, ids)
+        better = (d2 < dist2) | ((d2 == dist2) & (f < face))
+        return i + 1, jnp.where(better, f, face), jnp.where(better, d2, dist2)
+
+    start = jnp.where(done, n_blocks, 0)
+    dist2 = jnp.where(done, dist2, jnp.inf)
+    _, face, _ = jax.lax.while_loop(
+        lambda state: state[0] < n_blocks, body, (start, face, dist2)
+    )
+    return face
 
 
 def snap(
