@@ -21,21 +21,46 @@ from jaxtyping import ArrayLike
 
 from ._checks import check_arguments, check_batch_options, check_point_batch
 from ._errors import JaxgeoError
-from .geodesic import Method, _solve, _validate_options
+from .geodesic import (
+    Method,
+    _as_surface_point,
+    _finish_method,
+    _initial_status,
+    _validate_options,
+)
 from .locate import DEFAULT_MAX_DISTANCE
 from .mesh import Mesh
-from .normals import Weighting
+from .normals import Weighting, vertex_normals
 from .path import Path, Status
-from .trace import TraceOptions
+from .trace import TraceOptions, trace_batch
+
+#: Endpoints located together by `jax.lax.map` in `_solve_chunk`.
+_LOCATE_BATCH = 4
 
 
 @eqx.filter_jit
 def _solve_chunk(mesh, p1, p2, max_distance, weighting, options, method):
-    def one(a, b):
-        # The result leaves as numpy (not differentiable): no replay needed.
-        return _solve(mesh, a, b, max_distance, weighting, options, False, method)[0]
+    # Locating is a scan over all faces per point. Vmapped over a whole chunk its
+    # (chunk, faces) temporaries leave the cache and it ran 3× slower than small
+    # vmapped batches in sequence (256 points on a 20k-face mesh: 0.13 s vs 0.4 s).
+    def locate_all(points):
+        return jax.lax.map(
+            lambda p: _as_surface_point(mesh, p), points, batch_size=_LOCATE_BATCH
+        )
 
-    return jax.vmap(one)(p1, p2)
+    (start, d1), (end, d2) = locate_all(p1), locate_all(p2)
+    initial = jax.vmap(_initial_status, in_axes=(None, 0, 0, 0, 0, None))(
+        mesh, start, end, d1, d2, max_distance
+    )
+    normals = vertex_normals(mesh.vertices, mesh.faces, weighting)
+    traced = trace_batch(mesh, normals, start, end, options, initial)
+    if method == "laser":
+        return traced  # leaves as numpy (not differentiable): no replay needed
+
+    def finish(s, e, t, i):
+        return _finish_method(mesh, normals, s, e, t, i, False, method)
+
+    return jax.vmap(finish)(start, end, traced, initial)
 
 
 def _gather(x) -> np.ndarray:

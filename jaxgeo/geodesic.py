@@ -7,7 +7,7 @@ from typing import Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._checks import as_endpoint, check_arguments, check_point, is_traced
 from ._errors import JaxgeoError
@@ -50,11 +50,7 @@ def _solve(
 ) -> tuple[Path, SurfacePoint, SurfacePoint, Float[Array, "2"]]:
     start, d1 = _as_surface_point(mesh, p1)
     end, d2 = _as_surface_point(mesh, p2)
-    far = jnp.maximum(d1, d2) > max_distance * mesh.mean_edge_length
-    apart = mesh.face_component[start.face] != mesh.face_component[end.face]
-    initial = jnp.where(
-        far, Status.FAR_FROM_SURFACE, jnp.where(apart, Status.DIFFERENT_COMPONENTS, -1)
-    )
+    initial = _initial_status(mesh, start, end, d1, d2, max_distance)
     normals = vertex_normals(mesh.vertices, mesh.faces, weighting)
     traced = trace(
         jax.lax.stop_gradient(mesh),
@@ -64,18 +60,50 @@ def _solve(
         options,
         initial,
     )
+    path = _finish_method(
+        mesh, normals, start, end, traced, initial, differentiable, method
+    )
+    return path, start, end, jnp.stack([d1, d2])
+
+
+def _initial_status(
+    mesh: Mesh,
+    start: SurfacePoint,
+    end: SurfacePoint,
+    d1: Float[Array, ""],
+    d2: Float[Array, ""],
+    max_distance: float,
+) -> Int[Array, ""]:
+    """−1 (trace), or the status for endpoints too far from the surface (`d1`, `d2`:
+    the 3-D endpoints' distances) or on different components."""
+    far = jnp.maximum(d1, d2) > max_distance * mesh.mean_edge_length
+    apart = mesh.face_component[start.face] != mesh.face_component[end.face]
+    return jnp.where(
+        far, Status.FAR_FROM_SURFACE, jnp.where(apart, Status.DIFFERENT_COMPONENTS, -1)
+    ).astype(jnp.int32)
+
+
+def _finish_method(
+    mesh: Mesh,
+    normals: Float[Array, "V 3"],
+    start: SurfacePoint,
+    end: SurfacePoint,
+    traced: Path,
+    initial: Int[Array, ""],
+    differentiable: bool,
+    method: str,
+) -> Path:
+    """The path of `method` from the laser trace `traced`."""
+    if method == "exact":
+        return exact_path(mesh, start, end, traced, initial)
+    if method == "smooth":
+        return exact_path(mesh, start, end, traced, initial, smooth_normals=normals)
     # The replay only attaches derivatives: its points equal the traced ones to
     # rounding. Concrete calls outside any transformation cannot be differentiated
     # afterwards, so they skip it.
-    if method == "exact":
-        path = exact_path(mesh, start, end, traced, initial)
-    elif method == "smooth":
-        path = exact_path(mesh, start, end, traced, initial, smooth_normals=normals)
-    elif differentiable:
-        path = replay(mesh, normals, start, end, traced)
-    else:
-        path = traced
-    return path, start, end, jnp.stack([d1, d2])
+    if differentiable:
+        return replay(mesh, normals, start, end, traced)
+    return traced
 
 
 def shortest_path(
