@@ -1,15 +1,19 @@
-"""Phong vertex normals (eq. 8–9) and their linear interpolation along an edge
-(eq. 10)."""
+"""Phong vertex normals (eq. 8–9), a second-order fit for the normals at boundary
+vertices, and the normals' linear interpolation along an edge (eq. 10)."""
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
+import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from ._errors import JaxgeoError
 from ._numerics import safe_norm, safe_normalize
+
+if TYPE_CHECKING:
+    from .mesh import Mesh
 
 Weighting = Literal["uniform", "area", "angle"]
 
@@ -65,7 +69,10 @@ def vertex_normals(
 
     Accuracy: every weighting is O(h) accurate on a general mesh (the first-order
     errors of the face normals cancel only in point-symmetric fans, where it is
-    O(h²)); see `tests/test_normals.py` for measured constants.
+    O(h²)); see `tests/test_normals.py` for measured constants. At a boundary
+    vertex the fan is one-sided, nothing cancels, and the normal is O(h) off on
+    any mesh (0.4·h rad on the catenoid's rings); `fit_boundary_normals` replaces
+    those by a second-order fit.
 
     **Raises** `JaxgeoError` for an unknown `weighting`, or arrays of the wrong
     shape or dtype (integer coordinates would make the normals integers).
@@ -88,6 +95,122 @@ def vertex_normals(
         )
     summed = jnp.zeros_like(vertices).at[faces.reshape(-1)].add(w.reshape(-1, 3))
     return safe_normalize(summed)
+
+
+#: Smallest eigenvalue ratio λ_min/λ_max of the (scaled) normal equations for
+#: which the boundary fit is trusted. Regular boundary stencils measure 1e-3 to
+#: 1e-2; a stencil whose points lie near one line or conic in the tangent plane
+#: falls far below, and the vertex keeps its given normal.
+_FIT_CONDITION = 1e-6
+
+
+def _boundary_vertices(mesh: Mesh) -> Bool[Array, " V"]:
+    """Vertices on a boundary edge (an edge with one face)."""
+    open_edge = (mesh.edge_faces[:, 1] < 0).astype(jnp.int32)
+    hits = (
+        jnp.zeros(mesh.n_vertices, jnp.int32)
+        .at[mesh.edges.reshape(-1)]
+        .add(jnp.repeat(open_edge, 2))
+    )
+    return hits > 0
+
+
+def _fit_stencil(mesh: Mesh, verts: Int[Array, " B"]) -> Int[Array, "B 9K²"]:
+    """Per vertex v of `verts`, its two-ring: the vertices of the faces that touch
+    v's neighbours (v excluded; 11 points at a regular boundary vertex of a
+    triangulated grid: three rows, so the quadratic across the boundary is
+    determined). Padded with −1, no repeats."""
+    n_b = verts.shape[0]
+    vf = mesh.vertex_faces
+    f1 = vf[verts]  # (B, K) v's faces
+    ring1 = jnp.where((f1 >= 0)[..., None], mesh.faces[jnp.maximum(f1, 0)], -1)
+    ring1 = ring1.reshape(n_b, -1)  # (B, 3K) v and its neighbours, repeated
+    f2 = jnp.where((ring1 >= 0)[..., None], vf[jnp.maximum(ring1, 0)], -1)
+    f2 = f2.reshape(n_b, -1)  # (B, 3K²) faces touching them
+    ids = jnp.where((f2 >= 0)[..., None], mesh.faces[jnp.maximum(f2, 0)], -1)
+    ids = ids.reshape(n_b, -1)  # (B, 9K²)
+    ids = jnp.where(ids == verts[:, None], -1, ids)
+    ids = jnp.sort(ids, axis=1)
+    repeat = jnp.concatenate(
+        [jnp.zeros((n_b, 1), bool), ids[:, 1:] == ids[:, :-1]], axis=1
+    )
+    return jnp.where(repeat, -1, ids)
+
+
+def _jet_normal(p0, pts, live, n0):
+    """Normal at p0 of the least-squares quadratic height function
+    z = a·x + b·y + c·x² + d·xy + e·y² through p0, in the frame of n0; and
+    whether the fit is well posed."""
+    dtype = p0.dtype
+    axis = jnp.eye(3, dtype=dtype)[jnp.argmin(jnp.abs(n0))]
+    t1 = safe_normalize(jnp.cross(n0, axis))
+    t2 = jnp.cross(n0, t1)
+    d = pts - p0
+    x, y, z = d @ t1, d @ t2, d @ n0
+    rho = jnp.max(jnp.where(live, jnp.hypot(x, y), 0.0))
+    rho = jnp.where(rho > 0, rho, 1.0)
+    xs, ys = x / rho, y / rho  # scaled: the matrix's condition is h-free
+    a = jnp.stack([xs, ys, xs * xs, xs * ys, ys * ys], axis=1)
+    a = jnp.where(live[:, None], a, 0.0)
+    m = a.T @ a
+    eig = jnp.linalg.eigvalsh(jax.lax.stop_gradient(m))
+    ok = eig[0] > _FIT_CONDITION * eig[-1]
+    m = jnp.where(ok, m, jnp.eye(5, dtype=dtype))
+    coef = jnp.linalg.solve(m, a.T @ jnp.where(live, z / rho, 0.0))
+    # z/ρ = a·xs + b·ys + …  ⇒  ∂z/∂x = a, ∂z/∂y = b
+    n = safe_normalize(n0 - coef[0] * t1 - coef[1] * t2)
+    return n, ok
+
+
+@jax.jit
+def fit_boundary_normals(
+    mesh: Mesh, normals: Float[Array, "V 3"]
+) -> Float[Array, "V 3"]:
+    """`normals` with those of the boundary vertices replaced by the normal of a
+    local quadratic fit (a degree-2 osculating jet, Cazals & Pouget 2005).
+
+    Eq. (8)–(9) averages the faces around a vertex; at a boundary vertex they lie
+    on one side only, so their first-order errors do not cancel and the normal is
+    O(h) off (interior vertices of regular meshes: O(h²)). At a boundary vertex v
+    this fits z = a·x + b·y + c·x² + d·xy + e·y² (least squares, through v) to the
+    positions of v's two-ring in the tangent frame of the given normal n_v, and
+    returns the fitted surface's normal at v, ∝ n_v − a·t₁ − b·t₂. A degree-2
+    fit recovers the tangent plane to O(h²), the order of the interior normals.
+
+    A vertex keeps its given normal when its fit is ill-posed (fewer than five
+    independent stencil points, as at a corner with a single face; see
+    `_FIT_CONDITION`) or when the fitted normal would fold an incident face
+    (n · n_face ≤ 0). Interior vertices are unchanged.
+
+    **Arguments:** `mesh` (for its connectivity), `normals` `(V, 3)` unit vertex
+    normals, e.g. `vertex_normals(mesh.vertices, mesh.faces)`.
+
+    **Returns:** `(V, 3)` unit normals, differentiable in `mesh.vertices` and
+    `normals`. Compiled (`jax.jit`): eagerly, its many small operations would
+    dispatch one at a time.
+    """
+    # A manifold vertex has one fan, so a boundary vertex lies on exactly two
+    # boundary edges: there are as many boundary vertices as boundary edges,
+    # 2E − 3F (3F edge slots, two per interior edge, one per boundary edge). A
+    # static count, so only those vertices are fitted, under `jit` too.
+    n_open = 2 * mesh.n_edges - 3 * mesh.n_faces
+    if n_open <= 0:
+        return normals
+    n_v = mesh.n_vertices
+    verts = jnp.nonzero(_boundary_vertices(mesh), size=n_open, fill_value=n_v)[0]
+    real = verts < n_v
+    verts = jnp.minimum(verts, n_v - 1)
+    ids = _fit_stencil(mesh, verts)
+    v = mesh.vertices
+    fitted, ok = jax.vmap(_jet_normal)(
+        v[verts], v[jnp.maximum(ids, 0)], ids >= 0, normals[verts]
+    )
+    vf = mesh.vertex_faces[verts]
+    fn = face_normals(v, mesh.faces)[jnp.maximum(vf, 0)]  # (B, K, 3)
+    folds = jnp.any((vf >= 0) & (jnp.sum(fn * fitted[:, None, :], -1) <= 0), -1)
+    use = real & ok & ~jax.lax.stop_gradient(folds)
+    new = jnp.where(use[:, None], fitted, normals[verts])
+    return normals.at[jnp.where(real, verts, n_v)].set(new, mode="drop")
 
 
 def edge_normal(

@@ -1,5 +1,5 @@
 """Phong normals: eq. (8)–(9) by hand, the area and angle options, accuracy on a
-sphere, finite gradients, and eq. (10)."""
+sphere, the second-order fit at boundary vertices, finite gradients, and eq. (10)."""
 
 import functools
 
@@ -9,8 +9,16 @@ import numpy as np
 import pytest
 import trimesh
 
+from jaxgeo import validation
 from jaxgeo._errors import JaxgeoError
-from jaxgeo.normals import edge_normal, face_normals, vertex_normals
+from jaxgeo.mesh import Mesh
+from jaxgeo.normals import (
+    edge_normal,
+    face_normals,
+    fit_boundary_normals,
+    vertex_normals,
+)
+from jaxgeo.surfaces import catenoid_parameter
 
 WEIGHTINGS = ["uniform", "area", "angle"]
 
@@ -221,6 +229,118 @@ def test_symmetric_fans_are_second_order(weighting):
         assert err <= 1.0 * h**2
         errors.append(err)
     assert errors[0] / errors[1] > 3.2  # → 4 as h → 0; measured 3.5 here
+
+
+# ------------------------------------------------------------ boundary vertices
+#
+# At a boundary vertex the fan is one-sided: nothing cancels and eq. (8)–(9) is
+# O(h) off on any mesh. `fit_boundary_normals` fits a quadratic height function to
+# the vertex's two-ring instead, which recovers the tangent plane to O(h²).
+
+
+def _valence(f, n):
+    return np.bincount(np.asarray(f).ravel(), minlength=n)
+
+
+def _on_boundary(v, f):
+    m = Mesh(v, f)
+    ef, e = np.asarray(m.edge_faces), np.asarray(m.edges)
+    b = np.zeros(len(v), bool)
+    b[e[ef[:, 1] < 0].ravel()] = True
+    return m, b
+
+
+def test_boundary_fit_is_exact_on_a_quadratic():
+    """A quadratic height field z = q(x, y), fitted in the frame of the given normal
+    e_z, is reproduced exactly: the fitted normals at the boundary (the two corners
+    with a single face included: their two-ring holds 7 points) are the surface's
+    to rounding; interior vertices are untouched."""
+    v, f, *_ = spherical_cap(8)
+    x, y = v[:, 0], v[:, 1]
+    v = np.stack([x, y, 0.3 * x * x - 0.5 * x * y + 0.2 * y * y + 0.1 * x], 1)
+    m, b = _on_boundary(v, f)
+    assert (_valence(f, len(v))[b] == 1).sum() == 2
+    given = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    got = np.asarray(fit_boundary_normals(m, jnp.asarray(given)))
+    exact = np.stack([-(0.6 * x - 0.5 * y + 0.1), -(-0.5 * x + 0.4 * y), 1 + 0 * x], 1)
+    exact /= np.linalg.norm(exact, axis=1, keepdims=True)
+    np.testing.assert_allclose(got[b], exact[b], atol=1e-13)
+    np.testing.assert_array_equal(got[~b], given[~b])
+
+
+def _catenoid_normal(v):
+    """The analytic unit normal of validation's catenoid r = c·cosh(z/c)."""
+    c = catenoid_parameter()
+    th = np.arctan2(v[:, 1], v[:, 0])
+    n = np.stack([np.cos(th), np.sin(th), -np.sinh(v[:, 2] / c)], 1)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def test_boundary_normals_are_second_order():
+    """On the validation catenoid's rings (levels 4, 5) eq. (8)–(9) is first order,
+    measured max |n − n*| = 0.40·h; the fit is second order, 1.16·h² and 1.27·h²
+    (h the mean edge length), falling 3.6× per halving of h (→ 4)."""
+    err_fit, err_fan = [], []
+    for level in (4, 5):
+        v, f = validation.catenoid_mesh(level)
+        m, b = _on_boundary(v, f)
+        h = float(m.mean_edge_length)
+        fan = vertex_normals(v, f)
+        fit = np.asarray(fit_boundary_normals(m, fan))
+        exact = _catenoid_normal(v)
+        e_fit = np.linalg.norm(fit - exact, axis=1)[b].max()
+        e_fan = np.linalg.norm(np.asarray(fan) - exact, axis=1)[b].max()
+        assert e_fan >= 0.3 * h  # first order (the reason for the fit)
+        assert e_fit <= 2.0 * h**2
+        err_fit.append(e_fit)
+        err_fan.append(e_fan)
+    assert err_fit[0] / err_fit[1] > 3.2  # second order: → 4
+    assert 1.8 < err_fan[0] / err_fan[1] < 2.2  # first order: → 2
+
+
+def test_boundary_fit_on_a_spherical_cap():
+    """All boundary vertices of the cap (n = 16) are within 0.1·h² of the radial
+    normal after the fit (measured 0.059·h²; 0.107·h² at n = 8, 0.032·h² at
+    n = 32); eq. (8)–(9) there is at least 0.53·h off."""
+    v, f, interior, h, every = spherical_cap(16)
+    m, b = _on_boundary(v, f)
+    got = np.asarray(fit_boundary_normals(m, jnp.asarray(every[0])))
+    assert np.linalg.norm(got - v, axis=1)[b].max() <= 0.1 * h**2
+    assert np.linalg.norm(every[0] - v, axis=1)[b].min() >= 0.4 * h
+
+
+def test_boundary_fit_leaves_closed_and_small_fans_alone():
+    """A closed mesh has no boundary: the normals come back unchanged. At the box
+    corner each boundary vertex's two-ring holds 3 points for 5 unknowns: the fit
+    is ill-posed and eq. (8)–(9) stays."""
+    v, f = icosphere(2)
+    m = Mesh(v, f)
+    n = vertex_normals(v, f)
+    np.testing.assert_array_equal(fit_boundary_normals(m, n), n)
+    corner = Mesh(CORNER_V, CORNER_F)
+    n = vertex_normals(CORNER_V, CORNER_F)
+    np.testing.assert_array_equal(fit_boundary_normals(corner, n), n)
+
+
+def test_boundary_fit_gradient():
+    """d(Σ target · n)/d(vertices) of the fitted normals (the fit depends on the
+    stencil's positions and, through the frame, on eq. (8)–(9)) vs a central
+    difference along a random direction; 1e-6 relative as for the fan normals."""
+    v, f = validation.catenoid_mesh(2)
+    m = Mesh(v, f)
+    target = jnp.asarray(np.random.default_rng(5).normal(size=v.shape))
+
+    @jax.jit
+    def loss(x):
+        n = fit_boundary_normals(m.with_vertices(x), vertex_normals(x, m.faces))
+        return jnp.sum(n * target)
+
+    g = np.asarray(jax.grad(loss)(jnp.asarray(v)))
+    assert np.isfinite(g).all()
+    d = np.random.default_rng(6).normal(size=v.shape)
+    eps = 1e-6
+    fd = (float(loss(v + eps * d)) - float(loss(v - eps * d))) / (2 * eps)
+    np.testing.assert_allclose(np.sum(g * d), fd, rtol=1e-6)
 
 
 # ---------------------------------------------------------------- differentiability
