@@ -138,7 +138,8 @@ def shortest_paths(
         ca, cb = jnp.asarray(a[idx], dtype), jnp.asarray(b[idx], dtype)
         if sharding is not None:
             ca, cb = jax.device_put(ca, sharding), jax.device_put(cb, sharding)
-        paths = _solve_chunk(mesh, ca, cb, max_distance, normals, options, method)
+        limit = jnp.asarray(max_distance, dtype)  # an array: no recompile per value
+        paths = _solve_chunk(mesh, ca, cb, limit, normals, options, method)
         pieces.append(jax.tree.map(lambda x, k=stop - start: _gather(x)[:k], paths))
         if progress is not None:
             progress(stop, n)

@@ -42,7 +42,7 @@ def _solve(
     mesh: Mesh,
     p1: Endpoint,
     p2: Endpoint,
-    max_distance: float,
+    max_distance: float | Float[Array, ""],
     weighting: str,
     options: TraceOptions,
     differentiable: bool = True,
@@ -157,7 +157,8 @@ def shortest_path(
         mesh,
         p1,
         p2,
-        max_distance,
+        # an array, not a static float: a new value must not recompile
+        jnp.asarray(max_distance, mesh.vertices.dtype),
         normals,
         options,
         differentiable=not concrete,

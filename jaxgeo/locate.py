@@ -109,13 +109,13 @@ def locate(
     """The nearest point of the mesh to `point` and its distance.
 
     Exact (the nearest distance a brute force over all faces finds; among faces
-    tied to rounding, the lowest id) and jit- and vmap-friendly. Each face has a bounding sphere (centroid,
-    radius r). The face of the nearest centroid gives a first distance d; a face
-    whose centroid is farther than d + r cannot be nearer, so the exact nearest
-    point is computed only on the faces within reach (at most `_CANDIDATES`; when
-    more are, e.g. for a point far from the surface, on all faces). Returns
-    `(SurfacePoint, distance)`; the caller decides whether the distance is too far
-    (see `shortest_path`).
+    tied to rounding, the lowest id) and jit- and vmap-friendly. Each face has a
+    bounding sphere (centroid, radius r). The face of the nearest centroid gives a
+    first distance d; a face whose centroid is farther than d + r cannot be
+    nearer, so the exact nearest point is computed only on the faces within reach
+    (at most `_CANDIDATES`; when more are, e.g. for a point far from the surface,
+    on all faces). Returns `(SurfacePoint, distance)`; the caller decides whether
+    the distance is too far (see `shortest_path`).
     """
     tri = mesh.vertices[mesh.faces]  # (F, 3, 3)
     face = _nearest_face(jax.lax.stop_gradient(point), jax.lax.stop_gradient(tri))

@@ -1,5 +1,6 @@
 """Batches of paths: chunked vmap equals single calls, no recompilation for new
-batch sizes, sharding across (forced) host devices equals the unsharded result."""
+batch sizes or distance limits, sharding across (forced) host devices equals the
+unsharded result."""
 
 import logging
 import os
@@ -43,10 +44,14 @@ def test_batch_equals_single_paths():
 def test_new_batch_sizes_do_not_recompile(caplog):
     p1, p2 = _pairs(9, 1)
     jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128)  # compiles
+    jg.shortest_path(MESH, p1[0], p2[0], max_points=128)
     with jax.log_compiles(True), caplog.at_level(logging.WARNING):
         caplog.clear()
         jg.shortest_paths(MESH, p1[:5], p2[:5], chunk_size=4, max_points=128)
         jg.shortest_paths(MESH, p1[:3], p2[:3], chunk_size=4, max_points=128)
+        # nor does a new max_distance (an array argument, not a static one)
+        jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128, max_distance=2)
+        jg.shortest_path(MESH, p1[1], p2[1], max_points=128, max_distance=2)
     compiles = [r for r in caplog.records if "Compiling" in r.getMessage()]
     assert not compiles, [r.getMessage()[:120] for r in compiles]
 
