@@ -78,10 +78,14 @@ def _closest_on_triangle(p, a, b, c):
     return jnp.clip(bary, 0.0, 1.0)
 
 
-#: Faces whose exact nearest point is computed per query. Only faces whose
-#: bounding sphere reaches within the distance of a first guess can be nearest; on
-#: a mesh that resolves its surface those are a few rings of faces around the point.
-_CANDIDATES = 64
+#: Only faces whose bounding sphere reaches within the distance of a first guess
+#: can be nearest; on a mesh that resolves its surface those are a vertex ring or
+#: two (≤ 10 faces on the benchmark catenoid). The exact nearest point is computed
+#: on the blocks of `_BLOCK_FACES` consecutive faces that hold them, at most
+#: `_BLOCKS` blocks (blocks, not single faces: selecting a few of F faces costs a
+#: scan of F, of F/32 blocks a scan of F/32).
+_BLOCK_FACES = 32
+_BLOCKS = 16
 
 
 def _nearest_of(point, tri, faces):
@@ -113,7 +117,7 @@ def locate(
     bounding sphere (centroid, radius r). The face of the nearest centroid gives a
     first distance d; a face whose centroid is farther than d + r cannot be
     nearer, so the exact nearest point is computed only on the faces within reach
-    (at most `_CANDIDATES`; when more are, e.g. for a point far from the surface,
+    (when they span more than `_BLOCKS` blocks, e.g. for a point far from the surface,
     on all faces). Returns `(SurfacePoint, distance)`; the caller decides whether
     the distance is too far (see `shortest_path`).
     """
@@ -126,8 +130,9 @@ def locate(
 
 
 def _nearest_face(point, tri) -> Int[Array, ""]:
-    all_faces = jnp.arange(tri.shape[0], dtype=jnp.int32)
-    if tri.shape[0] <= _CANDIDATES:
+    n = tri.shape[0]
+    all_faces = jnp.arange(n, dtype=jnp.int32)
+    if n <= _BLOCK_FACES * _BLOCKS:
         return _nearest_of(point, tri, all_faces)[0]
     centre = jnp.mean(tri, axis=1)
     radius = jnp.max(jnp.linalg.norm(tri - centre[:, None], axis=-1), axis=1)
@@ -142,9 +147,14 @@ def _nearest_face(point, tri) -> Int[Array, ""]:
     reach = jnp.sqrt(d2_first) + radius
     slack = 64 * jnp.finfo(tri.dtype).eps * (pp + cc + reach * reach)
     near = d2c <= reach * reach + slack
-    (cand,) = jnp.nonzero(near, size=_CANDIDATES, fill_value=first)
-    face, _, dist2 = _nearest_of(point, tri, cand.astype(jnp.int32))
-    pruned = jnp.sum(near) <= _CANDIDATES
+    n_blocks = -(-n // _BLOCK_FACES)
+    near = jnp.pad(near, (0, n_blocks * _BLOCK_FACES - n))
+    near_blocks = jnp.any(near.reshape(n_blocks, _BLOCK_FACES), axis=1)
+    (blocks,) = jnp.nonzero(near_blocks, size=_BLOCKS, fill_value=0)
+    cand = blocks[:, None] * _BLOCK_FACES + jnp.arange(_BLOCK_FACES)
+    cand = jnp.minimum(cand.reshape(-1), n - 1).astype(jnp.int32)
+    face, _, dist2 = _nearest_of(point, tri, cand)
+    pruned = jnp.sum(near_blocks) <= _BLOCKS
     return _search_blocks(point, tri, pruned, face, dist2)
 
 

@@ -34,16 +34,17 @@ def test_locate_equals_brute_force_near_and_far_under_vmap():
 
     from jaxgeo.locate import _nearest_of
 
+    mesh = unit_icosphere(3)  # 1,280 faces: above the size searched in full
     rng = np.random.default_rng(1)
-    v = np.asarray(MESH.vertices)
+    v = np.asarray(mesh.vertices)
     near = v[rng.integers(len(v), size=20)] * rng.uniform(0.97, 1.03, (20, 1))
     far = rng.normal(scale=3.0, size=(10, 3))
     pts = jnp.asarray(np.concatenate([v[:10], near, far, np.zeros((1, 3))]))
-    tri = MESH.vertices[MESH.faces]
-    got, dist = jax.vmap(lambda p: jg.locate(MESH, p))(pts)
+    tri = mesh.vertices[mesh.faces]
+    got, dist = jax.vmap(lambda p: jg.locate(mesh, p))(pts)
     per_face = jax.vmap(
         lambda p: jax.vmap(lambda f: _nearest_of(p, tri, f[None])[2])(
-            jnp.arange(MESH.n_faces, dtype=MESH.faces.dtype)
+            jnp.arange(mesh.n_faces, dtype=mesh.faces.dtype)
         )
     )(pts)
     best = np.sqrt(np.min(per_face, axis=1))
