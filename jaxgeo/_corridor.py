@@ -51,6 +51,16 @@ class EndPoint:
         """Whether the point lies in the closure of `face`."""
         return set(self.support) <= set(topo.faces[face].tolist())
 
+    def faces(self, topo: Topology) -> set[int]:
+        """The faces whose closure holds the point (all faces round a vertex, both
+        faces of an edge, or the one face)."""
+        out = None
+        for v in self.support:
+            around = topo.vertex_faces[v]
+            ring = set(around[around >= 0].tolist())
+            out = ring if out is None else out & ring
+        return out or {self.face}
+
 
 class Topology:
     """Per-mesh numpy tables: face adjacency, corner angles, vertex angle sums,
@@ -202,15 +212,29 @@ class Topology:
             da, db = dist[0, :n], dist[1, :n]
             band = np.flatnonzero(np.abs(da - db) <= self.mean_edge_length)
             band = band[np.argsort(da[band] + db[band])]
-            mid = paths[0][len(paths[0]) // 2]
-            picked = [self.vertices[mid]] if mid < n else []
+            # a via vertex at least a mean edge from every vertex of the paths
+            # already picked (a via next to one of them, or on it, repeats it)
+            used = [x for x in paths[0] if x < n]
             for v in band.tolist():
                 if len(paths) > n_via:
                     break
                 x = self.vertices[v]
-                if all(np.linalg.norm(x - y) >= self.mean_edge_length for y in picked):
-                    picked.append(x)
-                    paths.append(walk(0, v)[::-1] + walk(1, v)[1:])
+                near = np.linalg.norm(self.vertices[used] - x, axis=1)
+                if near.size and near.min() < self.mean_edge_length:
+                    continue
+                # a via vertex at a dead end is reached and left by the same edge:
+                # drop such spurs (the corridor of a path that doubles back on
+                # itself cannot be built)
+                path: list[int] = []
+                for x in walk(0, v)[::-1] + walk(1, v)[1:]:
+                    if len(path) >= 2 and path[-2] == x:
+                        path.pop()
+                    else:
+                        path.append(x)
+                if path in paths:
+                    continue
+                paths.append(path)
+                used += [x for x in path if x < n]
         return paths
 
     def vertex_path_corridor(

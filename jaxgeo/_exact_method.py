@@ -37,13 +37,19 @@ _SEG_FIELDS = ("seg_first", "seg_last", "seg_has_steps", "seg_mask")
 _SEG_VERTS = ("a_vid", "a_src", "b_vid", "b_src")
 
 
-def laser_corridor(topo, edge_faces, kinds, elements, count) -> list[int]:
+def laser_corridor(
+    topo, edge_faces, kinds, elements, count, start: EndPoint, end: EndPoint
+) -> list[int]:
     """The faces a traced path crosses, in order, consecutive faces sharing an edge
-    (through a vertex point, the shorter way round the vertex's fan)."""
+    (through a vertex point, the shorter way round the vertex's fan). An endpoint
+    at a vertex or on an edge lies in all the faces round it: the trace may leave
+    it through any of them, not only through the face it was located in."""
     n = int(count)
     sets = []
-    for k, e in zip(kinds[:n], elements[:n]):
-        if k == FACE:
+    for i, (k, e) in enumerate(zip(kinds[:n], elements[:n])):
+        if k == FACE and i in (0, n - 1):
+            sets.append((start if i == 0 else end).faces(topo))
+        elif k == FACE:
             sets.append({int(e)})
         elif k == EDGE:
             sets.append(set(edge_faces[int(e)].tolist()) - {-1})
@@ -132,9 +138,11 @@ def _refine_numpy(treedef, cap, dtype, smooth, leaves, start, end, laser, initia
     kinds, elements, count, status = (np.asarray(x) for x in laser)
     corridors = []
     if int(status) == Status.SUCCESS:
-        c = laser_corridor(topo, np.asarray(mesh.edge_faces), kinds, elements, count)
+        s_pt, e_pt = EndPoint(topo, s_face, s_bary), EndPoint(topo, e_face, e_bary)
+        c = laser_corridor(
+            topo, np.asarray(mesh.edge_faces), kinds, elements, count, s_pt, e_pt
+        )
         if c:
-            s_pt, e_pt = EndPoint(topo, s_face, s_bary), EndPoint(topo, e_face, e_bary)
             corridors.append(clean_corridor(c, s_pt, e_pt, topo))
     try:
         path = exact_geodesic(mesh, s_face, s_bary, e_face, e_bary, corridors)
