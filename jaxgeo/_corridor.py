@@ -9,15 +9,19 @@ ends) and builds a corridor from a Dijkstra shortest path on the edge graph.
 
 from __future__ import annotations
 
+import hashlib
 import weakref
 from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, depth_first_order, dijkstra
 
 from ._errors import JaxgeoError
 from .mesh import Mesh
+
+#: An interior vertex whose angle sum is 2π less at most this counts as flat.
+CURVATURE_TOL = 1e-9
 
 
 class EndPoint:
@@ -105,6 +109,116 @@ class Topology:
             np.concatenate([edges[:, 1], edges[:, 0]]),
             np.concatenate([lengths, lengths]),
         )
+        #: No interior vertex of positive curvature (angle sum under 2π): the
+        #: surface is locally CAT(0), so each homotopy class of paths between two
+        #: points holds exactly one locally-shortest path (Cartan–Hadamard).
+        interior = ~self.boundary_vertex & (
+            np.bincount(f.ravel(), minlength=len(v)) > 0
+        )
+        self.nonpositive = bool(
+            np.all(self.angle_sum[interior] >= 2.0 * np.pi - CURVATURE_TOL)
+        )
+        self._potential_tree = None
+        # plain lists: the fan walks index them one element at a time
+        self._adj_list = self.adj.tolist()
+        self._corner_angle_list = angles.tolist()
+        vf = self.vertex_faces
+        self._vertex_face_list = [
+            row[:k].tolist() for row, k in zip(vf, (vf >= 0).sum(1).tolist())
+        ]
+        n = v.shape[0]
+        r0, c0, d0 = self._graph
+        self._csr = sp.csr_matrix((d0, (r0, c0)), shape=(n + 2, n + 2))
+
+    # ------------------------------------------------------------- homotopy
+
+    def _tree(self):
+        """A spanning forest of the edge graph rooted at the boundary vertices (one
+        root per component without boundary), as a preorder with subtree sizes."""
+        if self._potential_tree is None:
+            n = self.vertices.shape[0]
+            roots = np.flatnonzero(self.boundary_vertex)
+            comp_n, comp = connected_components(
+                sp.csr_matrix(
+                    (np.ones(len(self._graph[0])), self._graph[:2]), shape=(n, n)
+                ),
+                directed=False,
+            )
+            closed = np.setdiff1d(np.arange(comp_n), comp[roots])
+            first = np.full(comp_n, -1)
+            first[comp[::-1]] = np.arange(n)[::-1]
+            roots = np.concatenate([roots, first[closed]])
+            r0, c0, _ = self._graph
+            keep = ~np.isin(c0, roots)  # roots hang from the super-root only
+            r0, c0 = r0[keep], c0[keep]
+            rows = np.concatenate([r0, np.full(roots.size, n)])
+            cols = np.concatenate([c0, roots])
+            graph = sp.csr_matrix(
+                (np.ones(rows.size), (rows, cols)), shape=(n + 1,) * 2
+            )
+            order, pred = depth_first_order(graph, n, directed=True)
+            size = np.ones(n + 1, dtype=np.int64)
+            for x in order[:0:-1].tolist():
+                size[pred[x]] += size[x]
+            pos = np.empty(n + 1, dtype=np.int64)
+            pos[order] = np.arange(order.size)
+            self._potential_tree = (pred[:n], pos[:n], size[:n])
+        return self._potential_tree
+
+    def homotopic(self, a: Sequence[int], b: Sequence[int], start, end) -> bool:
+        """Whether two corridors between the same endpoints are homologous: the
+        closed walk `a`, then `b` backwards, crosses the edges as the coboundary
+        of a vertex potential that vanishes on the boundary (the rings of interior
+        vertices span the null-homologous walks). On a disk or an annulus this is
+        homotopy; on other surfaces homology, which it implies."""
+        walk = list(a) + self._join(a[-1], b[-1], end) + list(b[::-1])
+        walk += self._join(b[0], a[0], start) + [a[0]]
+        f = np.asarray(walk, dtype=np.int64)
+        f0, f1 = f[:-1], f[1:]
+        step = f0 != f1
+        f0, f1 = f0[step], f1[step]
+        if f0.size == 0:
+            return True
+        shared = self.adj[f0] == f1[:, None]
+        if not np.all(shared.any(1)):
+            return False
+        edge = self.face_edges[f0, np.argmax(shared, axis=1)]
+        p, q = self.edges[edge, 0], self.edges[edge, 1]
+        # f0 left of p -> q when its corners hold (p, q) in counter-clockwise order
+        c = np.argmax(self.faces[f0] == p[:, None], axis=1)
+        left = self.faces[f0, (c + 1) % 3] == q
+        w = np.bincount(edge, np.where(left, 1.0, -1.0), minlength=len(self.edges))
+        pred, pos, size = self._tree()
+        n = self.vertices.shape[0]
+        # tree edges (parent -> child) carrying w raise the child's subtree
+        hit = np.flatnonzero(w)
+        a_, b_ = self.edges[hit, 0], self.edges[hit, 1]
+        diff = np.zeros(n + 2)
+        for e, x, y in zip(hit.tolist(), a_.tolist(), b_.tolist()):
+            if pred[y] == x:  # x -> y, child y: phi(y) = phi(x) + w
+                child, val = y, w[e]
+            elif pred[x] == y:  # child x: phi(x) = phi(y) - w
+                child, val = x, -w[e]
+            else:
+                continue
+            diff[pos[child]] += val
+            diff[pos[child] + size[child]] -= val
+        phi = np.cumsum(diff)[pos]
+        return bool(np.all(phi[self.edges[:, 1]] - phi[self.edges[:, 0]] == w))
+
+    def _join(self, f: int, g: int, point) -> list[int]:
+        """Faces from `f` to `g` (both holding `point`), ends excluded."""
+        if f == g:
+            return []
+        if g in self._adj_list[f]:
+            return []
+        v = point.vertex
+        if v >= 0:
+            for ccw in (True, False):
+                fan = self.fan(v, f, g, ccw)
+                if fan is not None:
+                    return fan[1:-1]
+        raise JaxgeoError("corridor ends do not meet round the endpoint")
 
     # ------------------------------------------------------------------ fans
 
@@ -113,11 +227,16 @@ class Topology:
         corners = self._face_list[face]
         return corners.index(vertex) if vertex in corners else -1
 
+    def angle_at(self, face: int, vertex: int) -> float:
+        """The corner angle of `face` at `vertex` (a corner of it)."""
+        corners = self._face_list[face]
+        return self._corner_angle_list[face][corners.index(vertex)]
+
     def rotate(self, face: int, vertex: int, ccw: bool) -> int:
         """The next face around `vertex` from `face`, counter-clockwise (seen from
         the side the faces' orientation points to) or clockwise; -1 at a boundary."""
         c = self.corner(face, vertex)
-        return int(self.adj[face, (c + 1) % 3 if ccw else (c + 2) % 3])
+        return self._adj_list[face][(c + 1) % 3 if ccw else (c + 2) % 3]
 
     def fan(self, vertex: int, first: int, last: int, ccw: bool) -> list[int] | None:
         """Faces around `vertex` from `first` to `last` (both included) turning one
@@ -138,16 +257,15 @@ class Topology:
             c = self.corner(f, vertex)
             # in a counter-clockwise face (v, a, b), turning ccw around v goes
             # edge (v, a) -> face -> edge (v, b)
-            a, b = self.faces[f, (c + 1) % 3], self.faces[f, (c + 2) % 3]
+            corners = self._face_list[f]
+            a, b = corners[(c + 1) % 3], corners[(c + 2) % 3]
             first_edge_end = a if ccw else b
             if (first_edge_end == other) == after:
                 return int(f)
         return -1
 
     def _edge_faces(self, a: int, b: int) -> list[int]:
-        around = self.vertex_faces[a]
-        around = around[around >= 0]
-        return around[(self.faces[around] == b).any(1)].tolist()
+        return [f for f in self._vertex_face_list[a] if b in self._face_list[f]]
 
     # ------------------------------------------------------------ Dijkstra
 
@@ -184,14 +302,10 @@ class Topology:
             data += [d, d]
         if nodes[0] == nodes[1]:
             return [[nodes[0]]]
-        r0, c0, d0 = self._graph
-        graph = sp.csr_matrix(
-            (
-                np.concatenate([d0, data]),
-                (np.concatenate([r0, rows]), np.concatenate([c0, cols])),
-            ),
-            shape=(n + 2, n + 2),
-        )
+        graph = self._csr
+        if rows:
+            extra = sp.csr_matrix((data, (rows, cols)), shape=(n + 2, n + 2))
+            graph = graph + extra
         dist, pred = dijkstra(
             graph, indices=nodes, return_predecessors=True, min_only=False
         )
@@ -274,7 +388,7 @@ class Topology:
                 fan = self.fan(v, first, last, ccw)
                 if fan is None:
                     continue
-                angle = sum(self.corner_angle[f, self.corner(f, v)] for f in fan)
+                angle = sum(self.angle_at(f, v) for f in fan)
                 if angle < best_angle:
                     best, best_angle = fan, angle
             if best is None:
@@ -284,17 +398,31 @@ class Topology:
 
 
 _CACHE: dict[int, tuple[weakref.ref, Topology]] = {}
+#: By content: a `pure_callback` rebuilds the mesh from fresh arrays on every call.
+_BY_CONTENT: dict[tuple, Topology] = {}
+_BY_CONTENT_SIZE = 4
 
 
 def topology(mesh: Mesh) -> Topology:
-    """The `Topology` of a mesh, cached while the mesh object lives."""
+    """The `Topology` of a mesh, cached while the mesh object lives, and by the
+    content of its vertex and face arrays (the last few meshes)."""
     key = id(mesh)
     hit = _CACHE.get(key)
     if hit is not None and hit[0]() is mesh:
         return hit[1]
     for k in [k for k, (ref, _) in _CACHE.items() if ref() is None]:
         del _CACHE[k]
-    topo = Topology(mesh)
+    v = np.ascontiguousarray(np.asarray(mesh.vertices))
+    f = np.ascontiguousarray(np.asarray(mesh.faces))
+    digest = hashlib.blake2b(v.tobytes(), digest_size=16)
+    digest.update(f.tobytes())
+    content = (v.shape, v.dtype.str, f.shape, f.dtype.str, digest.digest())
+    topo = _BY_CONTENT.pop(content, None)
+    if topo is None:
+        topo = Topology(mesh)
+        while len(_BY_CONTENT) >= _BY_CONTENT_SIZE:
+            del _BY_CONTENT[next(iter(_BY_CONTENT))]
+    _BY_CONTENT[content] = topo  # most recent last
     _CACHE[key] = (weakref.ref(mesh), topo)
     return topo
 

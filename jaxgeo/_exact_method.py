@@ -22,7 +22,7 @@ from ._errors import JaxgeoError
 from .locate import SurfacePoint
 from .mesh import Mesh
 from .path import EDGE, FACE, VERTEX, Path, Status, pad_tail
-from .refine import PathStructure, _structure_length, exact_geodesic
+from .refine import PathStructure, _exact_geodesic_numpy, _structure_length
 from .smooth import smooth_geodesic, smooth_shortest_path
 
 _STEP_FIELDS = (
@@ -145,7 +145,7 @@ def _refine_numpy(treedef, cap, dtype, smooth, leaves, start, end, laser, initia
         if c:
             corridors.append(clean_corridor(c, s_pt, e_pt, topo))
     try:
-        path = exact_geodesic(mesh, s_face, s_bary, e_face, e_bary, corridors)
+        path = _exact_geodesic_numpy(mesh, s_face, s_bary, e_face, e_bary, corridors)
         n = int(np.asarray(path.points).shape[0])
         if n > cap:
             out["status"] = np.int32(Status.MAX_STEPS)

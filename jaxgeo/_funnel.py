@@ -179,10 +179,6 @@ def _point_xy(p: EndPoint, face_vids, corners, xy) -> np.ndarray:
     return out
 
 
-def _cross(xs, ys, o, a, b) -> float:
-    return (xs[a] - xs[o]) * (ys[b] - ys[o]) - (ys[a] - ys[o]) * (xs[b] - xs[o])
-
-
 def funnel(strip: Strip) -> list[int]:
     """The contacts (instances) of the shortest path through the strip, in order.
 
@@ -195,41 +191,47 @@ def funnel(strip: Strip) -> list[int]:
     run_end = strip.run_end.tolist()
     xs, ys = strip.xy[:, 0].tolist(), strip.xy[:, 1].tolist()
     apex, left, right = strip.start, lefts[0], rights[0]
+    # the cross products are written out: this loop is the refinement's hot spot
+    ax, ay = xs[apex], ys[apex]
+    lx, ly, rx, ry = xs[left] - ax, ys[left] - ay, xs[right] - ax, ys[right] - ay
     corners: list[int] = []
     i = 1
     while i <= n_portal:
         nl, nr = lefts[i], rights[i]
+        restart = -1
         if i == n_portal:  # the end point: inside the funnel, or past a side
-            if _cross(xs, ys, apex, left, nl) > 0.0:
-                corner = left
-            elif _cross(xs, ys, apex, right, nr) < 0.0:
-                corner = right
+            px, py = xs[nl] - ax, ys[nl] - ay
+            if lx * py - ly * px > 0.0:
+                restart = left
+            elif rx * py - ry * px < 0.0:
+                restart = right
             else:
                 break
-            corners.append(corner)
-            apex = corner
-            j = run_end[corner] + 1
-            left, right, i = lefts[j], rights[j], j + 1
+        else:
+            if nr != right:
+                px, py = xs[nr] - ax, ys[nr] - ay
+                if rx * py - ry * px >= 0.0:
+                    if lx * py - ly * px < 0.0:
+                        right, rx, ry = nr, px, py
+                    else:
+                        restart = left
+            if restart < 0 and nl != left:
+                px, py = xs[nl] - ax, ys[nl] - ay
+                if lx * py - ly * px <= 0.0:
+                    if rx * py - ry * px > 0.0:
+                        left, lx, ly = nl, px, py
+                    else:
+                        restart = right
+        if restart < 0:
+            i += 1
             continue
-        if nr != right and _cross(xs, ys, apex, right, nr) >= 0.0:
-            if _cross(xs, ys, apex, left, nr) < 0.0:
-                right = nr
-            else:
-                corners.append(left)
-                apex = left
-                j = run_end[left] + 1
-                left, right, i = lefts[j], rights[j], j + 1
-                continue
-        if nl != left and _cross(xs, ys, apex, left, nl) <= 0.0:
-            if _cross(xs, ys, apex, right, nl) > 0.0:
-                left = nl
-            else:
-                corners.append(right)
-                apex = right
-                j = run_end[right] + 1
-                left, right, i = lefts[j], rights[j], j + 1
-                continue
-        i += 1
+        corners.append(restart)
+        apex = restart
+        ax, ay = xs[apex], ys[apex]
+        j = run_end[apex] + 1
+        left, right, i = lefts[j], rights[j], j + 1
+        lx, ly = xs[left] - ax, ys[left] - ay
+        rx, ry = xs[right] - ax, ys[right] - ay
     return corners
 
 
@@ -299,8 +301,10 @@ def _add_touches(strip: Strip, points: list[int], tol: float) -> list[int]:
     # segment of each portal
     firsts = [0] + [int(strip.run_end[p]) + 1 for p in points[1:-1]]
     seg_of = np.searchsorted(np.asarray(firsts), np.arange(n_portal), "right") - 1
-    cand = np.unique(np.concatenate([strip.left, strip.right]))
-    cand = cand[np.isin(cand, points, invert=True)]
+    # the instances on some portal, but not already path points
+    on_portal = strip.run_start >= 0
+    on_portal[points] = False
+    cand = np.flatnonzero(on_portal)
     seg = seg_of[strip.run_start[cand]]
     ok = seg == seg_of[strip.run_end[cand]]
     pts = np.asarray(points)

@@ -319,3 +319,49 @@ def test_via_paths_are_distinct():
     )
     assert len(paths) == 3
     assert len({tuple(p) for p in paths}) == 3
+
+
+# ------------------------------------------------------ homotopy of corridors
+
+
+def _ring_corridors(mesh: Mesh, step: int = 0):
+    """Corridors between two vertices of the catenoid's middle ring, half the ring
+    less `step` vertices apart, one each way round the neck (the short way first),
+    and their endpoints."""
+    topo = topology(mesh)
+    v = np.asarray(mesh.vertices)
+    heights = np.unique(np.round(v[:, 2], 12))
+    ring = np.flatnonzero(np.isclose(v[:, 2], heights[len(heights) // 2]))
+    ring = ring[np.argsort(np.arctan2(v[ring, 1], v[ring, 0]))].tolist()
+    half = len(ring) // 2 - step
+    s = EndPoint(topo, *vertex_point(mesh, ring[0]))
+    e = EndPoint(topo, *vertex_point(mesh, ring[half]))
+    one = topo.vertex_path_corridor(ring[: half + 1], s, e)
+    other = topo.vertex_path_corridor([ring[0]] + ring[half:][::-1], s, e)
+    return topo, one, other, s, e
+
+
+def test_homotopy_of_corridors_round_the_catenoid_neck():
+    mesh = small_catenoid()
+    topo, one, other, s, e = _ring_corridors(mesh)
+    assert topo.nonpositive  # a catenoid has no interior positive curvature
+    assert not topo.homotopic(one, other, s, e)
+    assert topo.homotopic(one, one, s, e)
+    # a Dijkstra path (cutting across other faces and vertices) goes one way round
+    direct = topo.vertex_path_corridor(topo.vertex_paths(s, e)[0], s, e)
+    assert topo.homotopic(one, direct, s, e) != topo.homotopic(other, direct, s, e)
+    # a sphere has positive curvature: corridors are never skipped there
+    assert not topology(Mesh(*surfaces.icosphere(2))).nonpositive
+
+
+def test_each_way_round_the_neck_is_refined():
+    """Corridors of different homotopy classes are both refined: given the long
+    way round first, the short way still wins."""
+    mesh = small_catenoid()
+    _, short, long, s, e = _ring_corridors(mesh, step=3)
+    args = (s.face, s.bary, e.face, e.bary)
+    ls = float(exact_geodesic(mesh, *args, [short], dijkstra=False).length)
+    ll = float(exact_geodesic(mesh, *args, [long], dijkstra=False).length)
+    both = float(exact_geodesic(mesh, *args, [long, short], dijkstra=False).length)
+    assert ls < ll * (1 - 1e-3)
+    assert both == ls
