@@ -80,6 +80,8 @@ KIND_FACE, KIND_EDGE, KIND_VERTEX = 0, 1, 2
 
 #: A contact moves to the other side when the angle there is below π − this.
 ANGLE_TOL = 1e-9
+#: Explore releases the held vertex of this many forced paths (the shortest).
+RELEASE_TRIES = 8
 #: A vertex within this many mean edge lengths of the path becomes a contact.
 TOUCH_TOL = 1e-9
 
@@ -343,6 +345,7 @@ def _explore(
     improved = True
     while improved and tries < max_tries:
         improved = False
+        held = []  # forced paths that still lean on their vertex
         for _, inst in _near_walls(sol, radius):
             vid = int(sol.strip.vid[inst])
             if (
@@ -364,16 +367,24 @@ def _explore(
             new, faces, ok = _refine(
                 topo, trial, start, end, max_iter, frozenset([vid])
             )
-            if ok and any(int(new.strip.vid[p]) == vid for p in new.points[1:-1]):
-                # Held against `vid`, the rest of the path has moved to the other
-                # side's basin; released, it may stay there (a shorter geodesic
-                # half an edge or more away needs this: hypothesis found pairs on
-                # perturbed spheres) or slide back to `sol`.
-                new, faces, ok = _refine(topo, faces, start, end, max_iter)
+            if not ok:
+                continue
+            if any(int(new.strip.vid[p]) == vid for p in new.points[1:-1]):
+                held.append((new.length, vid, faces))
+            elif new.length < sol.length * (1.0 - 1e-14):
+                sol, corridor, improved = new, faces, True
+                tried = {vid}  # the path moved: the others are worth a new try
+                break
+        if improved:
+            continue
+        # Held against its vertex, the rest of a forced path may have moved into
+        # another basin; released, it may stay there (a shorter geodesic up to an
+        # edge aside needs this: found on perturbed spheres) or slide back. The
+        # forced paths closest to the current length are released.
+        for _, vid, faces in sorted(held)[:RELEASE_TRIES]:
+            new, faces, ok = _refine(topo, faces, start, end, max_iter)
             if ok and new.length < sol.length * (1.0 - 1e-14):
                 sol, corridor, improved = new, faces, True
-                # the path has moved: the vertices tried before are near it
-                # on other terms now (only `vid` would lead straight back)
                 tried = {vid}
                 break
     return sol, corridor

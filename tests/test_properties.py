@@ -297,15 +297,28 @@ def test_height_patch_float32(mesh_key, e1, e2):
     ("vertex", 474092, (0.0, 0.0)),
     ("vertex", 485678, (0.0, 0.0)),
 )
+# an endpoint 1e-10 of an edge from a vertex, snapped onto the vertex by the trace
+# (found by the long profile: the laser path was 6e-12 shorter than the exact one)
+@example(
+    ("sphere", 0, 0.0, 0.0), ("face", 5104, (0.0, 0.0)), ("edge", 46, (1e-10, 0.0))
+)
 def test_exact_method_is_symmetric(mesh_key, e1, e2):
     forward = solve_and_check(mesh_key, e1, e2, method="exact")
     backward = solve_and_check(mesh_key, e2, e1, method="exact")
+    mesh = make_mesh(mesh_key)
+    v = np.asarray(mesh.vertices, np.float64)
+    edges = np.asarray(mesh.edges)
+    longest = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1).max()
+    # the trace snaps an endpoint within param_tolerance of an edge or vertex onto
+    # it (see check_path), so the laser path may start and end that much closer
+    snap = param_tolerance(v.dtype) * longest
     for path, (p, q) in ((forward, (e1, e2)), (backward, (e2, e1))):
         laser = solve_and_check(mesh_key, p, q)
         if int(path.status) == int(laser.status) == jg.Status.SUCCESS:
             # the refinement starts from the laser path's corridor and only ever
-            # shortens it: never longer, up to rounding
-            assert float(path.length) <= float(laser.length) * (1 + 1e-12)
+            # shortens it: never longer, up to rounding and the two snaps
+            bound = float(laser.length) * (1 + 1e-12) + 2 * snap
+            assert float(path.length) <= bound
     if int(forward.status) == int(backward.status) == jg.Status.SUCCESS:
         np.testing.assert_allclose(
             float(forward.length), float(backward.length), rtol=1e-9
