@@ -365,3 +365,22 @@ def test_each_way_round_the_neck_is_refined():
     both = float(exact_geodesic(mesh, *args, [long, short], dijkstra=False).length)
     assert ls < ll * (1 - 1e-3)
     assert both == ls
+
+
+def test_via_path_through_a_dead_end_is_a_corridor():
+    """Regression (issue 7): a via vertex at a dead end of the edge graph (on the
+    tent's boundary) was reached and left by the same edge; the corridor of that
+    doubled-back path could not be built and the via was lost (3 of 900 via
+    corridors on random tents)."""
+    from tests.test_properties import tent
+
+    mesh = tent(32408, 0.29318917739918887, 0.02875228005538176)
+    topo = topology(mesh)
+    s = EndPoint(topo, 58, np.array([0.0, 0.0, 1.0]))
+    e = EndPoint(topo, 94, np.array([0.4254433509109603, 0.5745566490890397, 0.0]))
+    paths = topo.vertex_paths(s, e, 2)
+    assert len(paths) == 3
+    for p in paths:
+        assert all(p[k - 1] != p[k + 1] for k in range(1, len(p) - 1))  # no spur
+        corridor = topo.vertex_path_corridor(p, s, e)
+        assert s.in_face(topo, corridor[0]) and e.in_face(topo, corridor[-1])
