@@ -122,10 +122,12 @@ def _result_shapes(cap: int, dtype):
     return {k: jax.ShapeDtypeStruct(s, d) for k, (s, d) in shapes.items()}
 
 
-def _refine_numpy(treedef, cap, dtype, smooth, leaves, start, end, laser, initial):
+def _refine_numpy(
+    treedef, cap, dtype, smooth, leaves, start, end, laser, initial, normals
+):
     """The pure callback: numpy in, fixed-size numpy out. With `smooth`, the exact
-    path's strip is then repaired for the Phong surface (`smooth_shortest_path`),
-    and the polyline returned is that strip's."""
+    path's strip is then repaired for the Phong surface of the vertex `normals`
+    (`smooth_shortest_path`), and the polyline returned is that strip's."""
     shapes = _result_shapes(cap, dtype)
     out = {k: np.zeros(s.shape, s.dtype) for k, s in shapes.items()}
     out["status"] = np.int32(initial)
@@ -153,7 +155,7 @@ def _refine_numpy(treedef, cap, dtype, smooth, leaves, start, end, laser, initia
         out.update(_pad_structure(path.structure, np.asarray(mesh.faces[0]), cap))
         ok = bool(np.asarray(path.converged))
         if smooth and ok:
-            path, n, ok = _smooth_strip(mesh, start, end, path, cap)
+            path, n, ok = _smooth_strip(mesh, start, end, path, cap, normals)
     except Exception:  # noqa: BLE001 - a callback must return, never raise
         out["status"] = np.int32(Status.REFINE_FAILED)
         return out
@@ -165,7 +167,7 @@ def _refine_numpy(treedef, cap, dtype, smooth, leaves, start, end, laser, initia
     return {k: np.asarray(v, shapes[k].dtype) for k, v in out.items()}
 
 
-def _smooth_strip(mesh, start, end, path, cap):
+def _smooth_strip(mesh, start, end, path, cap, normals):
     s = SurfacePoint(np.asarray(start[0]), np.asarray(start[1], np.float64))
     e = SurfacePoint(np.asarray(end[0]), np.asarray(end[1], np.float64))
     inner = slice(1, int(np.asarray(path.points).shape[0]) - 1)
@@ -177,6 +179,7 @@ def _smooth_strip(mesh, start, end, path, cap):
         np.asarray(path.params)[inner],
         np.asarray(path.kinds)[inner],
         capacity=cap,
+        normals=np.asarray(normals),
     )
     return sp, int(sp.count), bool(np.asarray(sp.valid_strip))
 
@@ -195,6 +198,8 @@ def exact_path(
     cap = laser.points.shape[0]
     dtype = mesh.vertices.dtype
     leaves, treedef = jax.tree.flatten(jax.lax.stop_gradient(mesh))
+    # the repair of the smooth strip uses the same normals as the final solve
+    normals = jnp.zeros((0, 3), dtype) if smooth_normals is None else smooth_normals
     res = jax.pure_callback(
         lambda *a: _refine_numpy(treedef, cap, dtype, smooth_normals is not None, *a),
         _result_shapes(cap, dtype),
@@ -203,6 +208,7 @@ def exact_path(
         jax.lax.stop_gradient((end.face, end.bary)),
         (laser.kinds, laser.elements, laser.count, laser.status),
         initial_status,
+        jax.lax.stop_gradient(normals),
         vmap_method="sequential",
     )
     ok = res["status"] == Status.SUCCESS

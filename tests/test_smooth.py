@@ -149,6 +149,22 @@ def test_catenoid_acceptance():
     assert np.median(np.abs(err)) <= 1e-6
 
 
+def test_shortest_path_smooth_repairs_with_the_requested_weighting():
+    """`shortest_path(method="smooth", normals="angle")` repairs the strip and
+    solves on the same (angle-weighted, boundary-fitted) surface: its length is the
+    strip repair's with those normals, to the solver's convergence (gradient
+    ~1e-12, so lengths agree far below 1e-10)."""
+    suite = validation.catenoid_suite(3)
+    mesh = Mesh(suite.vertices, suite.faces)
+    faces = np.asarray(mesh.faces)
+    for p in suite.pairs[:4]:
+        s, e = _vertex_point(faces, p.v1), _vertex_point(faces, p.v2)
+        path = jaxgeo.shortest_path(mesh, s, e, method="smooth", normals="angle")
+        assert int(path.status) == 0
+        want = _smooth(mesh, s, e, normals="angle")
+        np.testing.assert_allclose(float(path.length), float(want.length), rtol=1e-10)
+
+
 def test_phong_normals_boundary_option():
     """`boundary="keep"` is the weighting itself; `"fit"` (default) changes the
     boundary vertices only; anything else is an error."""
