@@ -82,7 +82,8 @@ class SmoothPath(eqx.Module):
     - `faces`: `(M − 1,)` the face each segment runs in.
     - `count`, `length`.
     - `converged`: the projected gradient reached `gtol`.
-    - `grad_norm`: max-norm of the projected gradient dL/du at the end.
+    - `grad_norm`: max-norm of the projected gradient dL/du at the end, leaving
+      out crossings whose Newton step is below the rounding of u.
     - `hit_vertex`: some crossing sits at an end of its edge with the gradient
       pushing outwards: the smooth geodesic wants to leave the strip there (see
       `smooth_shortest_path(..., repair=True)`), or it really wraps the vertex.
@@ -324,8 +325,13 @@ def _minimise(faces, strip, vertices, normals, u0, alpha, n_quad, gtol, max_step
         return held, jnp.where(held, 0.0, g)
 
     def pg_norm(cur):
-        u, _, g, _, _, kink = cur
-        return jnp.max(jnp.abs(projected(u, g, kink)[1]), initial=0.0)
+        u, _, g, diag, _, kink = cur
+        pg = projected(u, g, kink)[1]
+        # A crossing whose Newton step |g|/H is below the rounding of u cannot
+        # move: the rest of its gradient is rounding (a path 1e-8 from a vertex has
+        # H ≈ 3e6, and stalled at |g| = 1e-10 on an 82k-face sphere).
+        pg = jnp.where(jnp.abs(pg) <= 4 * eps * jnp.abs(diag), 0.0, pg)
+        return jnp.max(jnp.abs(pg), initial=0.0)
 
     def cond(state):
         cur, _, _, it, n_fail = state
