@@ -72,7 +72,7 @@ def _initial_status(
     end: SurfacePoint,
     d1: Float[Array, ""],
     d2: Float[Array, ""],
-    max_distance: float,
+    max_distance: float | Float[Array, ""],
 ) -> Int[Array, ""]:
     """−1 (trace), or the status for endpoints too far from the surface (`d1`, `d2`:
     the 3-D endpoints' distances) or on different components."""

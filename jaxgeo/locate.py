@@ -158,8 +158,8 @@ def _nearest_face(point, tri) -> Int[Array, ""]:
     return _search_blocks(point, tri, pruned, face, dist2)
 
 
-#: Faces per block of the full search.
-_BLOCK = 4096
+#: Faces per step of the full search (bounds its temporaries on large meshes).
+_SEARCH_BLOCK = 4096
 
 
 def _search_blocks(point, tri, done, face, dist2):
@@ -170,8 +170,8 @@ def _search_blocks(point, tri, done, face, dist2):
     of it by XLA (and run unconditionally). Indexing by the loop counter keeps the
     work inside, so it costs nothing when every lane is `done`."""
     n = tri.shape[0]
-    n_blocks = -(-n // _BLOCK)
-    block = jnp.arange(min(_BLOCK, n), dtype=face.dtype)
+    n_blocks = -(-n // _SEARCH_BLOCK)
+    block = jnp.arange(min(_SEARCH_BLOCK, n), dtype=face.dtype)
 
     def body(state):
         i, face, dist2 = state

@@ -99,15 +99,15 @@ def star_faces(
 
 
 def local_candidates(
-    mesh: Mesh, kind: Int[Array, ""], index: Int[Array, ""]
+    mesh: Mesh, kind: Int[Array, ""], index: Int[Array, ""], star: Int[Array, " S"]
 ) -> tuple[Int[Array, " W"], Bool[Array, " W"]]:
     """The `"local"` candidate edges of a point, each once: the edges of the faces
     around it that do not pass through it. A face point: its face's 3 edges; an
     edge point: the other 4 edges of its 2 faces; a vertex: the rim of its ring,
-    the edge opposite the vertex in each face. Returns `(edges, live)`, padded to a
-    fixed width (`live` False on padding)."""
+    the edge opposite the vertex in each face. `star` is
+    `star_faces(mesh, kind, index)`. Returns `(edges, live)`, padded to a fixed
+    width (`live` False on padding)."""
     width = max(mesh.vertex_faces.shape[1], 6)
-    star = star_faces(mesh, kind, index)
     fe = mesh.face_edges[jnp.maximum(star, 0)]  # (S, 3)
     rim = jnp.sum(jnp.where(mesh.faces[jnp.maximum(star, 0)] == index, fe, 0), axis=1)
 
@@ -172,9 +172,9 @@ def _lane(
             (kind == VERTEX) & jnp.any(edges[cand] == idx, axis=1),
         )
 
-    def candidates(kind, idx, prev_kind, prev_idx):
+    def candidates(kind, idx, star, prev_kind, prev_idx):
         if options.candidates == "local":
-            cand, live = local_candidates(mesh, kind, idx)
+            cand, live = local_candidates(mesh, kind, idx, star)
         else:
             cand, live = all_edges, jnp.ones(all_edges.shape, bool)
         # Never step back onto the previous point's edge or through its vertex: on
@@ -214,7 +214,7 @@ def _lane(
         running = status < 0
         star = star_faces(mesh, kind, idx)
         reached = jnp.any((star[:, None] == target[None, :]) & (star[:, None] >= 0))
-        cand, live = candidates(kind, idx, prev_kind, prev_idx)
+        cand, live = candidates(kind, idx, star, prev_kind, prev_idx)
         e0, e1 = edges[cand, 0], edges[cand, 1]
         cr = solve_edges(
             pos,
