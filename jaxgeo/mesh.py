@@ -22,10 +22,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph  # noqa: F401
 import trimesh
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 from scipy.sparse.csgraph import connected_components
 
 from ._errors import JaxgeoError
+from ._fans import vertex_fans
+from ._landmarks import DEFAULT_LANDMARKS, landmark_forests
 
 #: A face whose area is below this fraction of the square of its longest edge is a
 #: needle. For a triangle, area / longest² = h / (2 L), with h its height over the
@@ -296,6 +298,11 @@ class Mesh(eqx.Module):
     - `vertex_faces`: `(V, K)` faces around each vertex, padded with `-1`.
     - `face_component`: `(F,)` connected-component label of each face.
     - `mean_edge_length`: a scalar length scale (tolerances are relative to it).
+    - `fan_faces`, `fan_spokes`, `fan_size`, `fan_closed`, `corner_fan_pos`: the
+      faces and edges round every vertex in rotational order (`jaxgeo._fans`).
+    - `landmark_pred`, `landmark_dist`, `landmark_root`: shortest-path forests of
+      `landmarks` landmark slots on the edge graph, from which the exact method
+      reads its starting paths (`jaxgeo._landmarks`).
 
     **Raises** `JaxgeoError` for wrong shapes or dtypes, an empty mesh, NaN or
     infinite coordinates, out-of-range indices, degenerate or duplicate faces,
@@ -311,8 +318,16 @@ class Mesh(eqx.Module):
     vertex_faces: Int[Array, "V K"]
     face_component: Int[Array, " F"]
     mean_edge_length: Float[Array, ""]
+    fan_faces: Int[Array, "V K"]
+    fan_spokes: Int[Array, "V K1"]
+    fan_size: Int[Array, " V"]
+    fan_closed: Bool[Array, " V"]
+    corner_fan_pos: Int[Array, "F 3"]
+    landmark_pred: Int[Array, "M V"]
+    landmark_dist: Float[Array, "M V"]
+    landmark_root: Int[Array, "M V"]
 
-    def __init__(self, vertices: Any, faces: Any):
+    def __init__(self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS):
         v, f = _check_arrays(vertices, faces)
         _check_faces(v, f)
         edges, edge_faces, face_edges, consistent = _edges(f)
@@ -337,6 +352,21 @@ class Mesh(eqx.Module):
         self.vertex_faces = jnp.asarray(_vertex_faces(f, v.shape[0]), jnp.int32)
         self.face_component = jnp.asarray(component, dtype=jnp.int32)
         self.mean_edge_length = jnp.asarray(lengths.mean(), dtype=self.vertices.dtype)
+        fans = vertex_fans(f, edge_faces, face_edges, v.shape[0])
+        self.fan_faces = jnp.asarray(fans["fan_faces"])
+        self.fan_spokes = jnp.asarray(fans["fan_spokes"])
+        self.fan_size = jnp.asarray(fans["fan_size"])
+        self.fan_closed = jnp.asarray(fans["fan_closed"])
+        self.corner_fan_pos = jnp.asarray(fans["corner_fan_pos"])
+        vertex_component = np.where(
+            fans["fan_size"] > 0, component[np.maximum(fans["fan_faces"][:, 0], 0)], -1
+        )
+        forests = landmark_forests(
+            v, edges, fans["fan_spokes"], vertex_component, max(int(landmarks), 1)
+        )
+        self.landmark_pred = jnp.asarray(forests["pred_spoke"])
+        self.landmark_dist = jnp.asarray(forests["dist"])
+        self.landmark_root = jnp.asarray(forests["root"])
 
     @property
     def n_vertices(self) -> int:

@@ -42,7 +42,8 @@ _MESSAGES = {
     Status.FAR_FROM_SURFACE: "an endpoint is too far from the surface",
     Status.DIFFERENT_COMPONENTS: "the endpoints lie on different connected "
     "components of the mesh",
-    Status.REFINE_FAILED: "the exact refinement did not converge",
+    Status.REFINE_FAILED: "the exact method did not converge (no start reached a "
+    "locally shortest path within max_iterations flip rounds)",
 }
 
 #: Kinds of path point, as in `Path.kinds`.
@@ -66,6 +67,10 @@ class Path(eqx.Module):
     - `branch`: `(M,)` True where the step to this point had several valid
       crossings ahead: a branch point in the sense of the paper's section 6.
     - `count`, `length`, `status` (a `Status` code).
+    - `stats`: the method's diagnostics, a dict of integer arrays (as optimistix's
+      `Solution.stats`): for `"exact"` the flip rounds (`iterations`) and `flips`
+      of the winning start, `starts` refined and `starts_converged`, and the final
+      `corridor_length` in faces; for `"laser"` the `branch_points`.
     """
 
     points: Float[Array, "M 3"]
@@ -76,6 +81,7 @@ class Path(eqx.Module):
     count: Int[Array, ""]
     length: Float[Array, ""]
     status: Int[Array, ""]
+    stats: dict[str, Int[Array, ""]] | None = None
 
     @property
     def ok(self) -> Bool[Array, ""]:

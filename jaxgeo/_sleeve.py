@@ -1,0 +1,298 @@
+"""A corridor of faces unfolded into the plane (a *sleeve*), in JAX.
+
+A corridor is a sequence of faces f_0 … f_{n−1} in which consecutive faces share an
+edge, the *portal* k between f_k and f_{k+1}. Travelling from f_0 to f_{n−1}, each
+portal has a left and a right vertex. The unfolding lays f_0 in the plane and every
+next face across its portal, so that the shortest path inside the corridor is a
+polyline of the plane (`jaxgeo._funnel`).
+
+Every vertex *occurrence* gets an instance id: 0 and 1 for portal 0's left and
+right vertex, k + 2 for the vertex of f_{k+1} opposite portal k. A vertex stays the
+same instance over the consecutive portals it belongs to (`inst_first` …
+`inst_last`), which is how the funnel and the flips tell a vertex the path wraps.
+
+The unfolding is a `lax.scan` over the fixed capacity (masked past n), so that
+`jax.grad` goes through it: it is also the differentiable length of the frozen
+combinatorics (envelope theorem, see `jaxgeo.exact`).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from ._numerics import safe_norm
+
+
+class Sleeve(eqx.Module):
+    """The unfolded corridor. Portal arrays have the corridor's capacity C (entry
+    k < n − 1 live); instance arrays have C + 1 entries (ids 0 … n live)."""
+
+    n: Int[Array, ""]
+    edge: Int[Array, " C"]
+    left: Int[Array, " C"]
+    right: Int[Array, " C"]
+    left_inst: Int[Array, " C"]
+    right_inst: Int[Array, " C"]
+    inst_vertex: Int[Array, " C1"]
+    inst_xy: Float[Array, "C1 2"]
+    inst_first: Int[Array, " C1"]
+    inst_last: Int[Array, " C1"]
+    inst_is_left: Bool[Array, " C1"]
+    start_xy: Float[Array, " 2"]
+    end_xy: Float[Array, " 2"]
+    valid: Bool[Array, ""]
+
+
+def _cross(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def portals(faces: Int[Array, "F 3"], face_edges: Int[Array, "F 3"], corridor, n):
+    """Edge, left and right vertex of every portal, the vertex opposite it in the
+    next face, and whether consecutive corridor faces share an edge."""
+    f, g = corridor[:-1], corridor[1:]
+    fe, ge = face_edges[f], face_edges[g]  # (C-1, 3)
+    match = fe[:, :, None] == ge[:, None, :]  # (C-1, 3, 3)
+    shared = jnp.any(match, axis=(1, 2))
+    cf = jnp.argmax(jnp.any(match, axis=2), axis=1)  # corner of f opposite it
+    cg = jnp.argmax(jnp.any(match, axis=1), axis=1)
+    rows = jnp.arange(f.shape[0])
+    edge = fe[rows, cf]
+    right = faces[f, :][rows, (cf + 1) % 3]
+    left = faces[f, :][rows, (cf + 2) % 3]
+    opposite = faces[g, :][rows, cg]
+    live = jnp.arange(f.shape[0]) < n - 1
+    valid = jnp.all(jnp.where(live, shared & (f != g), True))
+    pad = jnp.zeros((1,), left.dtype)
+    return (
+        jnp.concatenate([edge, pad]),
+        jnp.concatenate([left, pad]),
+        jnp.concatenate([right, pad]),
+        jnp.concatenate([opposite, pad]),
+        valid,
+    )
+
+
+def unfold(
+    vertices: Float[Array, "V 3"],
+    faces: Int[Array, "F 3"],
+    face_edges: Int[Array, "F 3"],
+    corridor: Int[Array, " C"],
+    n: Int[Array, ""],
+    start_bary: Float[Array, " 3"],
+    end_bary: Float[Array, " 3"],
+) -> Sleeve:
+    """Unfold `corridor[:n]` (n ≥ 2). `start_bary`/`end_bary` are the endpoints'
+    barycentric coordinates in the corridor's first/last face."""
+    cap = corridor.shape[0]
+    dtype = vertices.dtype
+    edge, left, right, opp, valid = portals(faces, face_edges, corridor, n)
+    # 3-D frames of every portal: the opposite vertex in edge coordinates
+    lv, rv, ov = vertices[left], vertices[right], vertices[opp]
+    e = lv - rv
+    el = safe_norm(e)
+    el_ = jnp.where(el > 0, el, 1.0)
+    q = ov - rv
+    ox = jnp.sum(q * e, -1) / el_
+    oy = safe_norm(jnp.cross(e, q)) / el_
+    # face 0's third vertex, behind portal 0
+    f0 = faces[corridor[0]]
+    apex0 = jnp.sum(jnp.where((f0 != left[0]) & (f0 != right[0]), f0, 0))
+    qa = vertices[apex0] - rv[0]
+    ax = jnp.sum(qa * e[0]) / el_[0]
+    ay = safe_norm(jnp.cross(e[0], qa)) / el_[0]
+
+    live = jnp.arange(cap) < n - 1
+    keep_right = jnp.concatenate([right[1:] == right[:-1], jnp.array([False])])
+
+    def step(carry, k):
+        l2, r2, li, ri = carry
+        ox_k, oy_k, keep_r, alive = ox[k], oy[k], keep_right[k], live[k]
+        d = l2 - r2
+        nd = safe_norm(d)
+        dn = d / jnp.where(nd > 0, nd, 1.0)
+        fwd = jnp.stack([dn[1], -dn[0]])
+        w2 = r2 + ox_k * dn + oy_k * fwd
+        wi = k + 2
+        nl2, nli = jnp.where(keep_r, w2, l2), jnp.where(keep_r, wi, li)
+        nr2, nri = jnp.where(keep_r, r2, w2), jnp.where(keep_r, ri, wi)
+        new = (
+            jnp.where(alive, nl2, l2),
+            jnp.where(alive, nr2, r2),
+            jnp.where(alive, nli, li),
+            jnp.where(alive, nri, ri),
+        )
+        return new, (l2, r2, li, ri, w2)
+
+    zero = jnp.zeros(2, dtype)
+    l0 = jnp.stack([el[0], jnp.zeros((), dtype)])
+    init = (l0, zero, jnp.int32(0), jnp.int32(1))
+    _, (l2, r2, li, ri, w2) = jax.lax.scan(step, init, jnp.arange(cap, dtype=jnp.int32))
+
+    # instances: 0, 1 = portal 0's ends; k + 2 = vertex opposite portal k
+    inst_vertex = jnp.concatenate([jnp.stack([left[0], right[0]]), opp[:-1]])
+    inst_xy = jnp.concatenate([jnp.stack([l2[0], r2[0]]), w2[:-1]])
+    k = jnp.arange(cap, dtype=jnp.int32)
+    inst_first = jnp.concatenate([jnp.zeros(2, jnp.int32), k[:-1] + 1])
+    big = jnp.where(live, k, -1)
+    inst_last = (
+        jnp.full(cap + 1, -1, jnp.int32)
+        .at[jnp.where(live, li, cap)]
+        .max(big, mode="drop")
+        .at[jnp.where(live, ri, cap)]
+        .max(big, mode="drop")
+    )
+    is_left = jnp.zeros(cap + 1, bool).at[jnp.where(live, li, cap)].set(True, mode="drop")
+
+    # the endpoints, from the barycentric coordinates of the first/last face
+    a2 = jnp.stack([ax, ay])  # portal 0 frame: forward is −y, f_0 behind
+    corners0 = jnp.where(
+        (f0 == left[0])[:, None],
+        l2[0],
+        jnp.where((f0 == right[0])[:, None], r2[0], a2),
+    )
+    last = jnp.maximum(n - 2, 0)
+    fl = faces[corridor[jnp.maximum(n - 1, 0)]]
+    corners1 = jnp.where(
+        (fl == left[last])[:, None],
+        l2[last],
+        jnp.where((fl == right[last])[:, None], r2[last], w2[last]),
+    )
+    return Sleeve(
+        n=n,
+        edge=edge,
+        left=left,
+        right=right,
+        left_inst=li,
+        right_inst=ri,
+        inst_vertex=inst_vertex,
+        inst_xy=inst_xy,
+        inst_first=inst_first,
+        inst_last=inst_last,
+        inst_is_left=is_left,
+        start_xy=start_bary @ corners0,
+        end_xy=end_bary @ corners1,
+        valid=valid,
+    )
+
+
+def portal_xy(sleeve: Sleeve) -> tuple[Float[Array, "C 2"], Float[Array, "C 2"]]:
+    """2-D positions of every portal's left and right vertex."""
+    return sleeve.inst_xy[sleeve.left_inst], sleeve.inst_xy[sleeve.right_inst]
+
+
+#: Instance ids of the endpoints in a pinned list.
+START, END = -1, -2
+
+
+def lane_loop(cond, body, state):
+    """`while any lane is active: state = vmap(body)(state, active)`, for a state
+    whose leaves have a leading lane axis. Unlike `vmap(while_loop)` it never
+    selects whole carried buffers between iterations, so `body` must leave an
+    inactive lane unchanged itself (scatter with `mode="drop"` to an index out
+    of range, `where` on scalars)."""
+    active = jax.vmap(cond)
+
+    def step(s):
+        return jax.vmap(body)(s, active(s))
+
+    return jax.lax.while_loop(lambda s: jnp.any(active(s)), step, state)
+
+
+def funnel(sleeves: Sleeve) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
+    """The shortest path inside each sleeve of a lane batch (the funnel algorithm
+    of Lee & Preparata, in the form of Mononen's "simple stupid funnel"): the
+    instance ids of the points where it bends, `START` first and `END` last, their
+    count, and False when the loop ran out of steps (it cannot for a valid sleeve:
+    each restart moves on)."""
+    cap = sleeves.left.shape[-1]
+    limit = 4 * cap + 8
+    lxy, rxy = jax.vmap(portal_xy)(sleeves)
+
+    def point(sl, lx, rx, i):
+        at_end = i >= sl.n - 1
+        j = jnp.minimum(i, cap - 1)
+        return (
+            jnp.where(at_end, sl.end_xy, lx[j]),
+            jnp.where(at_end, END, sl.left_inst[j]),
+            jnp.where(at_end, sl.end_xy, rx[j]),
+            jnp.where(at_end, END, sl.right_inst[j]),
+        )
+
+    def cond(s):
+        lane = s[0]
+        return (s[1] <= lane.n - 1) & (s[13] < limit)
+
+    def body(s, active):
+        sl, i, ap, ai, a_i, lp, li, l_i, rp, ri, r_i, out, m, steps, lx, rx = s
+        pl, il, pr, ir = point(sl, lx, rx, i)
+        # right side narrows?
+        r_tight = _cross(rp - ap, pr - ap) >= 0
+        # a side at the apex itself (its vertex is still a portal end) bounds
+        # nothing: the other side cannot cross it
+        r_ok = (ai == ri) | (ai == li) | (_cross(lp - ap, pr - ap) < 0)
+        r_move = r_tight & r_ok
+        r_over = r_tight & ~r_ok  # crosses the left side: left becomes the apex
+        rp2 = jnp.where(r_move, pr, rp)
+        ri2 = jnp.where(r_move, ir, ri)
+        r_i2 = jnp.where(r_move, i, r_i)
+        # left side narrows? (only when the right did not restart)
+        l_tight = _cross(lp - ap, pl - ap) <= 0
+        l_ok = (ai == li) | (ai == ri2) | (_cross(rp2 - ap, pl - ap) > 0)
+        l_move = ~r_over & l_tight & l_ok
+        l_over = ~r_over & l_tight & ~l_ok
+        lp2 = jnp.where(l_move, pl, lp)
+        li2 = jnp.where(l_move, il, li)
+        l_i2 = jnp.where(l_move, i, l_i)
+        restart = r_over | l_over
+        np_ = jnp.where(r_over, lp2, rp2)  # the new apex
+        ni = jnp.where(r_over, li2, ri2)
+        n_i = jnp.where(r_over, l_i2, r_i2)
+        # a restart at the apex itself (its vertex is still a portal end) only
+        # moves on: no new bend
+        bend = active & restart & (ni != ai)
+        out = out.at[jnp.where(bend, m, out.shape[0])].set(ni, mode="drop")
+
+        def upd(new, old):
+            return jnp.where(active, new, old)
+
+        return (
+            sl,
+            upd(jnp.where(restart, n_i + 1, i + 1), i),
+            upd(jnp.where(restart, np_, ap), ap),
+            upd(jnp.where(restart, ni, ai), ai),
+            upd(jnp.where(restart, n_i, a_i), a_i),
+            upd(jnp.where(restart, np_, lp2), lp),
+            upd(jnp.where(restart, ni, li2), li),
+            upd(jnp.where(restart, n_i, l_i2), l_i),
+            upd(jnp.where(restart, np_, rp2), rp),
+            upd(jnp.where(restart, ni, ri2), ri),
+            upd(jnp.where(restart, n_i, r_i2), r_i),
+            out,
+            m + bend,
+            steps + active,
+            lx,
+            rx,
+        )
+
+    lanes = sleeves.n.shape[0]
+    sp = sleeves.start_xy
+    i32 = jnp.zeros(lanes, jnp.int32)
+    out = jnp.full((lanes, cap + 2), END, jnp.int32).at[:, 0].set(START)
+    init = (
+        sleeves, i32, sp, i32 + START, i32 - 1, sp, i32 + START, i32 - 1,
+        sp, i32 + START, i32 - 1, out, i32 + 1, i32, lxy, rxy,
+    )  # fmt: skip
+    s = lane_loop(cond, body, init)
+    out, m, steps = s[11], s[12], s[13]
+
+    def close(out, m):
+        ends_at_end = out[m - 1] == END
+        out = jnp.where(ends_at_end, out, out.at[m].set(END))
+        return out, jnp.where(ends_at_end, m, m + 1)
+
+    out, m = jax.vmap(close)(out, m)
+    return out, m.astype(jnp.int32), steps < limit

@@ -1,0 +1,549 @@
+"""The exact polyhedral geodesic, computed inside the compiled program.
+
+**The method** (the wedge flips of Sharp & Crane's FlipOut, 2020, done on a face
+corridor of the input mesh). A geodesic of a triangle mesh is a polyline that is
+straight in every face it crosses, straight across every edge once its two faces
+are unfolded, and passes through a vertex only where the angle on *both* sides of
+it is at least π. Given a corridor (faces f_0 … f_{n−1} from the start's face to the
+end's, consecutive faces sharing an edge):
+
+1. unfold it into the plane and pull the string: the funnel algorithm gives the
+   shortest path inside the corridor and the vertices it wraps (`jaxgeo._sleeve`);
+2. at a wrapped vertex v the path turns by τ, so the angle on the corridor's side is
+   π + |τ| and the angle on the other side is Θ(v) − π − |τ| (Θ(v): the sum of v's
+   face angles). If that is below π, going round the other side is shorter: the
+   corridor's faces round v are replaced by the complementary fan (a *wedge flip*).
+   The old path still lies in the new corridor and bends there by less than π, so
+   the new string is strictly shorter and the loop cannot cycle. Boundary vertices
+   never flip. All flips whose fans do not overlap are made at once;
+3. backtracks (f, g, f) are removed and the corridor is trimmed to the last face
+   that holds the start and the first that holds the end; repeat until no flip is
+   possible (or `max_iterations`).
+
+**Starts.** The loop converges to a locally shortest path in the class of its start.
+The starts are graph paths s → landmark → t read from shortest-path forests built
+once per mesh (`jaxgeo._landmarks`): the `max_starts` landmarks that give the
+shortest graph paths, refined as parallel lanes (`jax.vmap`), the shortest result
+kept. Per query there is no graph search: walking a forest costs the path's length.
+
+**Gradients.** The discrete choices (corridor, wrapped vertices) are made under
+`stop_gradient`; the length is then recomputed from the live vertices and endpoint
+barycentrics by unfolding the final corridor (a `lax.scan`) and summing the planar
+distances between wrapped vertices. By the envelope theorem that is the exact
+derivative of the minimal length (the crossing parameters are optimal), and the
+crossing points are differentiable through the unfolding too.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from . import _sleeve
+from ._numerics import safe_norm
+from ._starts import best_slots, corridor_from_vertices, vertex_path
+from .locate import SurfacePoint
+from .mesh import Mesh
+from .path import EDGE, FACE, VERTEX, Status
+
+__all__ = ["ExactStats", "exact_solve", "vertex_angle_sums"]
+
+
+class ExactStats(eqx.Module):
+    """Diagnostics of one exact solve (as optimistix's `Solution.stats`)."""
+
+    iterations: Int[Array, ""]  # flip rounds of the winning start
+    flips: Int[Array, ""]  # wedge flips made by the winning start
+    starts: Int[Array, ""]  # starts refined
+    starts_converged: Int[Array, ""]
+    corridor_length: Int[Array, ""]  # faces in the final corridor
+
+
+def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
+    """Θ(v): the sum of the face angles at every vertex."""
+    p = vertices[faces]  # (F, 3, 3)
+    a = jnp.roll(p, -1, axis=1) - p
+    b = jnp.roll(p, 1, axis=1) - p
+    ang = jnp.arctan2(safe_norm(jnp.cross(a, b)), jnp.sum(a * b, -1))
+    return jnp.zeros(vertices.shape[0], vertices.dtype).at[faces].add(ang)
+
+
+# ------------------------------------------------------------------- endpoints
+
+
+def _snap_tol(dtype) -> float:
+    """Barycentric coordinates below this are zero (the point is on an edge or a
+    vertex): eps^(2/3), 4e-11 in float64, so snapping moves a point by at most
+    that fraction of an edge."""
+    return float(jnp.finfo(dtype).eps) ** (2 / 3)
+
+
+class _End(eqx.Module):
+    """An endpoint: its face, snapped barycentrics, and the element it lies on."""
+
+    face: Int[Array, ""]
+    bary: Float[Array, " 3"]
+    kind: Int[Array, ""]  # FACE, EDGE or VERTEX
+    index: Int[Array, ""]
+
+
+def _end(mesh: Mesh, sp: SurfacePoint) -> _End:
+    b = sp.bary / jnp.sum(sp.bary)
+    small = b <= _snap_tol(b.dtype)
+    b = jnp.where(small, 0.0, b)
+    b = b / jnp.sum(b)
+    n_small = jnp.sum(small)
+    kind = jnp.where(n_small >= 2, VERTEX, jnp.where(n_small == 1, EDGE, FACE))
+    index = jnp.where(
+        kind == VERTEX,
+        mesh.faces[sp.face, jnp.argmax(b)],
+        jnp.where(kind == EDGE, mesh.face_edges[sp.face, jnp.argmax(small)], sp.face),
+    )
+    return _End(sp.face, b, kind.astype(jnp.int32), index.astype(jnp.int32))
+
+
+def _contains(mesh: Mesh, end: _End, faces):
+    """Does each face in `faces` hold the endpoint?"""
+    ef = mesh.edge_faces[end.index]
+    on_vertex = jnp.any(mesh.faces[jnp.maximum(faces, 0)] == end.index, axis=-1)
+    return (faces >= 0) & jnp.where(
+        end.kind == VERTEX,
+        on_vertex,
+        jnp.where(end.kind == EDGE, (faces == ef[0]) | (faces == ef[1]), faces == end.index),
+    )
+
+
+def _bary_in(mesh: Mesh, end: _End, face):
+    """The endpoint's barycentric coordinates in `face` (which must hold it)."""
+    same = mesh.faces[face][:, None] == mesh.faces[end.face][None, :]
+    return jnp.sum(jnp.where(same, end.bary[None, :], 0.0), axis=1)
+
+
+def _common_face(mesh: Mesh, s: _End, t: _End):
+    """A face holding both endpoints, or −1."""
+    cand = jnp.where(
+        s.kind == VERTEX,
+        mesh.fan_faces[s.index],
+        jnp.full(mesh.fan_faces.shape[1], -1, jnp.int32)
+        .at[0]
+        .set(jnp.where(s.kind == EDGE, mesh.edge_faces[s.index, 0], s.face))
+        .at[1]
+        .set(jnp.where(s.kind == EDGE, mesh.edge_faces[s.index, 1], -1)),
+    )
+    hit = _contains(mesh, t, cand) & (cand >= 0)
+    return jnp.where(jnp.any(hit), cand[jnp.argmax(hit)], -1)
+
+
+# ------------------------------------------------------------ corridor edits
+
+
+def _clean(mesh: Mesh, corridor, n, s: _End, t: _End):
+    """For a lane batch: remove backtracks (f, g, f → f), then trim each corridor
+    to the last leading face that holds the start and the first trailing face that
+    holds the end."""
+    cap = corridor.shape[-1]
+
+    def cond(st):
+        return st[0] < st[4]
+
+    def body(st, active):
+        k, stack, top, cor, n = st
+        f = cor[jnp.minimum(k, cap - 1)]
+        pop = (top >= 2) & (stack[jnp.maximum(top - 2, 0)] == f)
+        push = active & ~pop
+        stack = stack.at[jnp.where(push, top, cap)].set(f, mode="drop")
+        top = jnp.where(active, jnp.where(pop, top - 1, top + 1), top)
+        return k + active, stack, top, cor, n
+
+    lanes = n.shape[0]
+    zero = jnp.zeros(lanes, jnp.int32)
+    init = (zero, jnp.full((lanes, cap), -1, jnp.int32), zero, corridor, n)
+    _, stack, top, _, _ = _sleeve.lane_loop(cond, body, init)
+    return jax.vmap(lambda st, m, s_, t_: _trim(mesh, st, m, s_, t_))(stack, top, s, t)
+
+
+def _trim(mesh: Mesh, stack, n, s: _End, t: _End):
+    cap = stack.shape[0]
+    k = jnp.arange(cap)
+    live = k < n
+    hold_s = _contains(mesh, s, stack) & live
+    hold_t = _contains(mesh, t, stack) & live
+    first_out = jnp.argmin(jnp.concatenate([hold_s, jnp.array([False])]))
+    r = jnp.maximum(first_out - 1, 0)
+    rev = hold_t[::-1] | (k[::-1] >= n)  # trailing faces (dead slots count as in)
+    tail = jnp.argmin(jnp.concatenate([rev, jnp.array([False])]))
+    e = jnp.minimum(cap - tail, n - 1)
+    e = jnp.where(hold_t[jnp.clip(e, 0, cap - 1)], e, n - 1)
+    new_n = e - r + 1
+    out = jnp.where(k < new_n, stack[jnp.clip(k + r, 0, cap - 1)], -1)
+    return out, new_n.astype(jnp.int32)
+
+
+def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
+    """The wedge flips to make: for every pinned point, whether to flip it and
+    the complementary fan (vertex, first position, direction, face count)."""
+    cap = corridor.shape[0]
+    q = jnp.arange(pinned.shape[0])
+    inst = jnp.maximum(pinned, 0)
+    xy = _pinned_xy(sleeve, pinned)
+    prev = xy[jnp.maximum(q - 1, 0)]
+    nxt = xy[jnp.minimum(q + 1, pinned.shape[0] - 1)]
+    d_in, d_out = xy - prev, nxt - xy
+    tau = jnp.arctan2(_sleeve._cross(d_in, d_out), jnp.sum(d_in * d_out, -1))
+    is_left = sleeve.inst_is_left[inst]
+    beta = jnp.pi + jnp.where(is_left, tau, -tau)
+    v = sleeve.inst_vertex[inst]
+    nv = mesh.fan_size[v]
+    a, b = sleeve.inst_first[inst], sleeve.inst_last[inst]
+    run = b - a + 2  # corridor faces a … b + 1 hold v
+    interior = (q >= 1) & (q <= m - 2)
+    flip = (
+        interior
+        & mesh.fan_closed[v]
+        & (theta[v] - beta < jnp.pi - tol)
+        & (run <= nv)
+        & (b >= a)
+    )
+    fa = corridor[jnp.clip(a, 0, cap - 1)]
+    fa1 = corridor[jnp.clip(a + 1, 0, cap - 1)]
+    fb = corridor[jnp.clip(b + 1, 0, cap - 1)]
+    pos = jax.vmap(_pos_in_fan, in_axes=(None, 0, 0))
+    p0, p_next, p1 = pos(mesh, fa, v), pos(mesh, fa1, v), pos(mesh, fb, v)
+    nv_ = jnp.maximum(nv, 1)
+    d = jnp.where((p_next - p0) % nv_ == 1, 1, -1)  # the corridor's direction
+    count = ((p0 - p1) * d) % nv_ + 1  # the other way round, both ends included
+
+    # Fans of consecutive wrapped vertices may share a face (never of others):
+    # in every chain of such conflicts take every other flip, the rest wait.
+    prev_flip = jnp.concatenate([jnp.array([False]), flip[:-1]])
+    prev_b = jnp.concatenate([jnp.array([-2], b.dtype), b[:-1]])
+    conflict = flip & prev_flip & (a <= prev_b + 1)
+    chain_start = jax.lax.cummax(jnp.where(flip & ~conflict, q, -1))
+    taken = flip & ((q - chain_start) % 2 == 0)
+    return taken, v, a, b, p0, -d, count
+
+
+def _pos_in_fan(mesh: Mesh, face, vertex):
+    corner = jnp.argmax(mesh.faces[face] == vertex)
+    return mesh.corner_fan_pos[face, corner]
+
+
+def _apply_flips(mesh: Mesh, corridor, n, taken, v, a, b, p0, d, count):
+    """Replace corridor faces a … b + 1 of every taken flip by its fan."""
+    cap = corridor.shape[0]
+    k = jnp.arange(cap)
+    slot = jnp.where(taken, a, cap)
+    is_start = jnp.zeros(cap, bool).at[slot].set(True, mode="drop")
+    f_v = jnp.zeros(cap, jnp.int32).at[slot].set(v, mode="drop")
+    f_p = jnp.zeros(cap, jnp.int32).at[slot].set(p0, mode="drop")
+    f_d = jnp.zeros(cap, jnp.int32).at[slot].set(d, mode="drop")
+    f_c = jnp.zeros(cap, jnp.int32).at[slot].set(count, mode="drop")
+    diff = (
+        jnp.zeros(cap + 2, jnp.int32)
+        .at[jnp.where(taken, a + 1, cap + 1)]
+        .add(1, mode="drop")
+        .at[jnp.where(taken, b + 2, cap + 1)]
+        .add(-1, mode="drop")
+    )
+    inside = jnp.cumsum(diff)[:cap] > 0
+    cnt = jnp.where(k < n, jnp.where(inside, 0, jnp.where(is_start, f_c, 1)), 0)
+    cum = jnp.cumsum(cnt)
+    total = cum[-1]
+    j = jnp.arange(cap)
+    src = jnp.clip(jnp.searchsorted(cum, j, side="right"), 0, cap - 1)
+    off = j - (cum[src] - cnt[src])
+    vv = f_v[src]
+    pos = (f_p[src] + f_d[src] * off) % jnp.maximum(mesh.fan_size[vv], 1)
+    face = jnp.where(is_start[src], mesh.fan_faces[vv, pos], corridor[src])
+    return jnp.where(j < total, face, -1), total, total <= cap
+
+
+def _pinned_xy(sleeve: _sleeve.Sleeve, pinned):
+    inst = jnp.maximum(pinned, 0)
+    return jnp.where(
+        (pinned == _sleeve.START)[:, None],
+        sleeve.start_xy,
+        jnp.where((pinned == _sleeve.END)[:, None], sleeve.end_xy, sleeve.inst_xy[inst]),
+    )
+
+
+def _pinned_length(sleeve, pinned, m):
+    xy = _pinned_xy(sleeve, pinned)
+    seg = safe_norm(xy[1:] - xy[:-1])
+    return jnp.sum(jnp.where(jnp.arange(1, pinned.shape[0]) < m, seg, 0.0))
+
+
+def _sleeve_of(mesh: Mesh, corridor, n, s: _End, t: _End):
+    first = corridor[0]
+    last = corridor[jnp.maximum(n - 1, 0)]
+    return _sleeve.unfold(
+        mesh.vertices,
+        mesh.faces,
+        mesh.face_edges,
+        jnp.where(corridor >= 0, corridor, first),
+        n,
+        _bary_in(mesh, s, first),
+        _bary_in(mesh, t, last),
+    )
+
+
+# --------------------------------------------------------------- the flip loop
+
+
+class _Lane(eqx.Module):
+    corridor: Int[Array, " C"]
+    n: Int[Array, ""]
+    length: Float[Array, ""]
+    iterations: Int[Array, ""]
+    flips: Int[Array, ""]
+    status: Int[Array, ""]
+    done: Bool[Array, ""]
+
+
+def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
+    """Flip until no wrapped vertex admits a shorter way round, for a lane batch
+    (leading axis of every argument but `mesh`, `theta`)."""
+    dtype = mesh.vertices.dtype
+    lanes_v = jax.vmap
+
+    def body(lane: _Lane) -> _Lane:
+        active = ~lane.done
+        sl = lanes_v(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
+            lane.corridor, lane.n, s, t
+        )
+        pinned, m, fun_ok = _sleeve.funnel(sl)
+        length = lanes_v(_pinned_length)(sl, pinned, m)
+        taken, v, a, b, p0, d, count = lanes_v(
+            lambda c, sl_, p, m_: _flips(mesh, theta, c, sl_, p, m_, tol)
+        )(lane.corridor, sl, pinned, m)
+        n_taken = jnp.sum(taken, axis=-1, dtype=jnp.int32)
+        new, new_n, fits = lanes_v(
+            lambda *x: _apply_flips(mesh, *x)
+        )(lane.corridor, lane.n, taken, v, a, b, p0, d, count)
+        new, new_n = _clean(mesh, new, new_n, s, t)
+        good = sl.valid & fun_ok
+        converged = good & (n_taken == 0)
+        status = jnp.where(
+            ~good,
+            Status.REFINE_FAILED,
+            jnp.where(converged, Status.SUCCESS, jnp.where(fits, -1, Status.MAX_STEPS)),
+        )
+        stop = ~active | (status >= 0)
+        return _Lane(
+            corridor=jnp.where(stop[:, None], lane.corridor, new).astype(jnp.int32),
+            n=jnp.where(stop, lane.n, new_n).astype(jnp.int32),
+            length=jnp.where(active, length, lane.length),
+            iterations=(lane.iterations + active).astype(jnp.int32),
+            flips=lane.flips + jnp.where(stop, 0, n_taken),
+            status=jnp.where(active & (status >= 0), status, lane.status).astype(
+                jnp.int32
+            ),
+            done=lane.done | stop,
+        )
+
+    def cond(lane):
+        return jnp.any(~lane.done & (lane.iterations < max_iterations))
+
+    corridor, n = _clean(mesh, corridor, n, s, t)
+    lanes = n.shape[0]
+    init = _Lane(
+        corridor=corridor,
+        n=n,
+        length=jnp.full(lanes, jnp.inf, dtype),
+        iterations=jnp.zeros(lanes, jnp.int32),
+        flips=jnp.zeros(lanes, jnp.int32),
+        status=jnp.asarray(status0, jnp.int32),
+        done=status0 >= 0,
+    )
+    lane = jax.lax.while_loop(cond, body, init)
+    # out of iterations: the path is valid but maybe not locally shortest
+    status = jnp.where(lane.done, lane.status, Status.REFINE_FAILED).astype(jnp.int32)
+    return eqx.tree_at(lambda x: x.status, lane, status)
+
+
+def _start(mesh, slot, slot_ok, s, t, cap):
+    """A starting corridor from the forest path of `slot` (one lane)."""
+    vs = mesh.faces[s.face, jnp.argmax(s.bary)]
+    vt = mesh.faces[t.face, jnp.argmax(t.bary)]
+    path, count, path_ok = vertex_path(mesh, slot, vs, vt, cap)
+    corridor, n, c_ok = corridor_from_vertices(mesh, path, count, s.face, t.face, cap)
+    status0 = jnp.where(
+        ~slot_ok, Status.REFINE_FAILED, jnp.where(path_ok & c_ok, -1, Status.MAX_STEPS)
+    )
+    return corridor, n, status0.astype(jnp.int32)
+
+
+# ------------------------------------------------------------------ the result
+
+
+class ExactResult(eqx.Module):
+    """Buffers of capacity M (see `jaxgeo.path.Path`), the length and status."""
+
+    points: Float[Array, "M 3"]
+    kinds: Int[Array, " M"]
+    elements: Int[Array, " M"]
+    params: Float[Array, " M"]
+    count: Int[Array, ""]
+    length: Float[Array, ""]
+    status: Int[Array, ""]
+    stats: ExactStats
+
+
+def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points):
+    """Points, kinds, elements, params and length of the string in the frozen
+    corridor, differentiable in the vertices and the endpoints' barycentrics."""
+    sl = _sleeve_of(mesh, corridor, n, s, t)
+    one = jax.tree.map(lambda x: x[None], jax.lax.stop_gradient(sl))
+    pinned, m, _ = jax.tree.map(lambda x: x[0], _sleeve.funnel(one))
+    length = _pinned_length(sl, pinned, m)
+    cap = corridor.shape[0]
+    q = jnp.arange(pinned.shape[0])
+    inst = jnp.maximum(pinned, 0)
+    first = jnp.where(
+        pinned == _sleeve.START,
+        -1,
+        jnp.where((pinned == _sleeve.END) | (q >= m), n - 1, sl.inst_first[inst]),
+    )
+    k = jnp.arange(cap)
+    j = jnp.clip(jnp.searchsorted(first, k, side="right") - 1, 0, pinned.shape[0] - 2)
+    pj = pinned[j]
+    at_vertex = (j >= 1) & (j <= m - 2) & (k <= sl.inst_last[jnp.maximum(pj, 0)])
+    portal = k < n - 1
+    emit = portal & (~at_vertex | (k == sl.inst_first[jnp.maximum(pj, 0)]))
+    xy = _pinned_xy(sl, pinned)
+    P, Q = xy[j], xy[j + 1]
+    lxy, rxy = _sleeve.portal_xy(sl)
+    dq = Q - P
+    den = _sleeve._cross(lxy - rxy, dq)
+    tt = _sleeve._cross(P - rxy, dq) / jnp.where(den != 0, den, 1.0)
+    tt = jnp.clip(tt, 0.0, 1.0)
+    v = mesh.vertices
+    cross3 = (1 - tt)[:, None] * v[sl.right] + tt[:, None] * v[sl.left]
+    vert = sl.inst_vertex[jnp.maximum(pj, 0)]
+    pts = jnp.where(at_vertex[:, None], v[vert], cross3)
+    edge = sl.edge
+    u = jnp.where(mesh.edges[edge, 0] == sl.right, tt, 1 - tt)
+    kinds = jnp.where(at_vertex, VERTEX, EDGE)
+    elems = jnp.where(at_vertex, vert, edge)
+    params = jnp.where(at_vertex, 0.0, u)
+
+    slot = jnp.where(emit, jnp.cumsum(emit), cap_points)  # 1 … : after the start
+    count = jnp.sum(emit) + 2
+
+    def scatter(buf, x):
+        return buf.at[slot].set(x, mode="drop")
+
+    dtype = v.dtype
+    P3 = scatter(jnp.zeros((cap_points, 3), dtype), pts)
+    K = scatter(jnp.zeros(cap_points, jnp.int32), kinds)
+    E = scatter(jnp.zeros(cap_points, jnp.int32), elems)
+    U = scatter(jnp.zeros(cap_points, dtype), params)
+    last = jnp.minimum(count - 1, cap_points - 1)
+    P3 = P3.at[0].set(start).at[last].set(end)
+    K = K.at[0].set(FACE).at[last].set(FACE)
+    E = E.at[0].set(s.face).at[last].set(t.face)
+    U = U.at[0].set(0.0).at[last].set(0.0)
+    # the unused tail repeats the end point
+    tail = jnp.arange(cap_points) > last
+    P3 = jnp.where(tail[:, None], end, P3)
+    return P3, K, E, U, count, length
+
+
+def exact_solve(
+    mesh: Mesh,
+    start: SurfacePoint,
+    end: SurfacePoint,
+    *,
+    max_points: int,
+    max_starts: int = 4,
+    max_iterations: int = 256,
+    corridor_capacity: int | None = None,
+) -> ExactResult:
+    """The exact polyhedral geodesics from `start[i]` to `end[i]` for a batch of
+    endpoint pairs (leading axis B of `start.face`, `start.bary`, …; see the module
+    docstring). All B × `max_starts` starts are refined as lanes of one compiled
+    loop. jit/vmap/grad-compatible; `status` says whether each path succeeded.
+
+    **Arguments:** `max_points`: capacity of the result's buffers; `max_starts`:
+    landmark starts refined per pair; `max_iterations`: flip rounds at most;
+    `corridor_capacity`: faces a corridor may hold (default `max_points`).
+
+    **Returns:** an `ExactResult` with a leading batch axis.
+    """
+    cap = corridor_capacity or max_points
+    dtype = mesh.vertices.dtype
+    tol = 10 * float(jnp.finfo(dtype).eps) ** 0.5
+    s, t = jax.vmap(lambda p: _end(mesh, p))(start), jax.vmap(lambda p: _end(mesh, p))(end)
+    sg = jax.lax.stop_gradient
+    smesh = sg(mesh)
+    ss, ts = sg(s), sg(t)
+    theta = vertex_angle_sums(smesh.vertices, smesh.faces)
+
+    def graph_vertex(e: _End):
+        return smesh.faces[e.face, jnp.argmax(e.bary)]
+
+    vs, vt = jax.vmap(graph_vertex)(ss), jax.vmap(graph_vertex)(ts)
+    slots, slot_ok = jax.vmap(lambda a, b: best_slots(smesh, a, b, max_starts))(vs, vt)
+    n_pairs, k = slots.shape
+
+    def lanes_of(x):  # (B, ...) → (B·k, ...)
+        return jnp.repeat(x, k, axis=0)
+
+    s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
+    corridor, n, status0 = jax.vmap(lambda a, b, c, d: _start(smesh, a, b, c, d, cap))(
+        slots.reshape(-1), slot_ok.reshape(-1), s_l, t_l
+    )
+    lanes = _refine(smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol)
+    lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
+    good = lanes.status == Status.SUCCESS
+    score = jnp.where(good, lanes.length, jnp.inf)
+    best = jnp.argmin(score, axis=1)
+    win = jax.tree.map(lambda x: x[jnp.arange(n_pairs), best], lanes)
+    status = jnp.where(jnp.any(good, axis=1), Status.SUCCESS, lanes.status[:, 0])
+    stats = ExactStats(
+        iterations=win.iterations,
+        flips=win.flips,
+        starts=jnp.sum(slot_ok, axis=1, dtype=jnp.int32),
+        starts_converged=jnp.sum(good, axis=1, dtype=jnp.int32),
+        corridor_length=win.n,
+    )
+    return jax.vmap(
+        lambda *a: _finish(mesh, *a, max_points)
+    )(start, end, s, t, win.corridor, win.n, status, stats)
+
+
+def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):
+    """One pair's result from its winning corridor (differentiable)."""
+    smesh = jax.lax.stop_gradient(mesh)
+    ss, ts = jax.lax.stop_gradient((s, t))
+    p_start, p_end = start.position(mesh), end.position(mesh)
+    P3, K, E, U, count, length = _assemble(
+        mesh, corridor, n, s, t, p_start, p_end, max_points
+    )
+    # a face holding both endpoints: the straight segment is globally shortest
+    direct = _common_face(smesh, ss, ts) >= 0
+    idx = jnp.arange(max_points)
+    P3 = jnp.where(direct, jnp.where((idx >= 1)[:, None], p_end, p_start), P3)
+    K = jnp.where(direct, FACE, K)
+    E = jnp.where(direct, jnp.where(idx >= 1, t.face, s.face), E)
+    U = jnp.where(direct, 0.0, U)
+    count = jnp.where(direct, 2, count)
+    length = jnp.where(direct, safe_norm(p_end - p_start), length)
+    status = jnp.where(direct, Status.SUCCESS, status)
+    ok = status == Status.SUCCESS
+    status = jnp.where(ok & (count > max_points), Status.MAX_STEPS, status)
+    zero = jnp.zeros((), jnp.int32)
+    stats = jax.tree.map(lambda x: jnp.where(direct, zero, x), stats)
+    stats = eqx.tree_at(lambda x: x.corridor_length, stats, jnp.where(direct, 1, stats.corridor_length))
+    return ExactResult(
+        points=P3,
+        kinds=K,
+        elements=E,
+        params=U,
+        count=count.astype(jnp.int32),
+        length=length,
+        status=status.astype(jnp.int32),
+        stats=stats,
+    )

@@ -1,0 +1,137 @@
+"""The methods, as `eqx.Module`s holding their options (as `optimistix.Newton`
+holds its tolerances). `shortest_path(..., method=Exact(max_starts=8))`; the
+strings "exact", "laser" and "smooth" are shorthands for the defaults.
+
+Each method solves a batch of located endpoint pairs (`solve`): the single-path
+API calls it with a batch of one, `shortest_paths` with a chunk.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Int
+
+from ._errors import JaxgeoError
+from .exact import exact_solve
+from .locate import SurfacePoint
+from .mesh import Mesh
+from .normals import Weighting, vertex_normals
+from .path import Path, Status
+from .replay import replay
+from .trace import TraceOptions, trace_batch
+
+
+class Exact(eqx.Module):
+    """The exact polyhedral geodesic, computed in JAX (`jaxgeo.exact`): landmark
+    graph paths refined by wedge flips until locally shortest, the shortest of
+    `max_starts` kept. Length and points differentiable. The default method."""
+
+    max_starts: int = 4
+    max_iterations: int = 256
+
+    def solve(self, mesh, start, end, initial, max_points, differentiable) -> Path:
+        res = exact_solve(
+            mesh,
+            start,
+            end,
+            max_points=max_points,
+            max_starts=self.max_starts,
+            max_iterations=self.max_iterations,
+        )
+        status = jnp.where(initial >= 0, initial, res.status).astype(jnp.int32)
+        stats = {k: getattr(res.stats, k) for k in _EXACT_STATS}
+        return Path(
+            points=res.points,
+            kinds=res.kinds,
+            elements=res.elements,
+            params=res.params,
+            branch=jnp.zeros(res.kinds.shape, bool),
+            count=res.count,
+            length=res.length,
+            status=status,
+            stats=stats,
+        )
+
+
+_EXACT_STATS = ("iterations", "flips", "starts", "starts_converged", "corridor_length")
+
+
+class Laser(eqx.Module):
+    """The paper's sliding laser ray (sections 4–5; `jaxgeo.trace`): System (16) as
+    a batched `optimistix.Newton` root find per step. Not a shortest path in
+    general (see the README's validation table). `candidates`: `"local"` or
+    `"all"` edges per step; `normals`: vertex-normal weighting (eq. 8–9:
+    `"uniform"`)."""
+
+    candidates: Literal["local", "all"] = "local"
+    normals: Weighting = "uniform"
+
+    def solve(self, mesh, start, end, initial, max_points, differentiable) -> Path:
+        normals = vertex_normals(mesh.vertices, mesh.faces, self.normals)
+        options = TraceOptions(candidates=self.candidates, max_points=max_points)
+        sg = jax.lax.stop_gradient
+        traced = trace_batch(sg(mesh), sg(normals), sg(start), sg(end), options, initial)
+        if differentiable:
+            traced = jax.vmap(lambda s, e, t: replay(mesh, normals, s, e, t))(
+                start, end, traced
+            )
+        stats = {"branch_points": jnp.sum(traced.branch, axis=-1, dtype=jnp.int32)}
+        return eqx.tree_at(lambda p: p.stats, traced, stats, is_leaf=lambda x: x is None)
+
+
+class Smooth(eqx.Module):
+    """The geodesic of the smooth surface the Phong normals define (Phong
+    tessellation, α = ½; `jaxgeo.smooth`), started from the exact path.
+    `normals`: vertex-normal weighting."""
+
+    normals: Weighting = "uniform"
+
+    def solve(self, mesh, start, end, initial, max_points, differentiable) -> Path:
+        from .smooth import smooth_from_exact
+
+        exact = Exact().solve(mesh, start, end, initial, max_points, differentiable)
+        return smooth_from_exact(mesh, start, end, exact, self.normals)
+
+
+AnyMethod = Exact | Laser | Smooth
+Method = Literal["exact", "laser", "smooth"] | AnyMethod
+#: The method names `shortest_path` accepts.
+METHODS: tuple[str, ...] = ("exact", "laser", "smooth")
+_BY_NAME = {"exact": Exact, "laser": Laser, "smooth": Smooth}
+
+
+def as_method(method: Method, **legacy) -> AnyMethod:
+    """The method object for a name or an object; `legacy` keywords (the
+    `candidates=`/`normals=` arguments of `shortest_path`) fill options a name
+    leaves at their defaults."""
+    if isinstance(method, Exact | Laser | Smooth):
+        return method
+    if not isinstance(method, str) or method not in _BY_NAME:
+        raise JaxgeoError(
+            f"unknown method {method!r}; expected one of {METHODS} or a "
+            "jaxgeo.Exact/Laser/Smooth object"
+        )
+    cls = _BY_NAME[method]
+    fields = {f for f in cls.__dataclass_fields__}
+    return cls(**{k: v for k, v in legacy.items() if k in fields and v is not None})
+
+
+def initial_status(
+    mesh: Mesh,
+    start: SurfacePoint,
+    end: SurfacePoint,
+    d1,
+    d2,
+    max_distance,
+) -> Int[Array, ""]:
+    """−1 (solve), or the status for endpoints too far from the surface (`d1`,
+    `d2`: the 3-D endpoints' distances) or on different components."""
+    far = jnp.maximum(d1, d2) > max_distance * mesh.mean_edge_length
+    apart = mesh.face_component[start.face] != mesh.face_component[end.face]
+    return jnp.where(
+        far, Status.FAR_FROM_SURFACE, jnp.where(apart, Status.DIFFERENT_COMPONENTS, -1)
+    ).astype(jnp.int32)
