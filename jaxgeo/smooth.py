@@ -30,7 +30,11 @@ Strip repair (`smooth_shortest_path`, eager): a crossing pulled onto an end of i
 edge means the path touches a vertex; runs of such crossings become one vertex
 node, and the path is released to either side of the vertex's fan (all contacts
 together, or one at a time), started on the unfolded straight line; the shortest
-result wins, until nothing changes.
+result wins, until nothing changes. `smooth_path` is the same repair as
+fixed-shape JAX (jit, vmap, grad; no host callback): the candidate strips of a
+round (as it is, all contacts to side 0, all to side 1, each of the first
+`max_single` contacts alone to either side) are solved in parallel under `vmap`
+in a `lax.while_loop` over rounds (`jaxgeo._smooth_repair` builds them).
 
 Differentiation. At the solution L is stationary in the free u (and the bounds do
 not depend on the mesh), so by the envelope theorem dL/dθ = ∂L/∂θ at fixed u* for
