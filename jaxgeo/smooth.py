@@ -30,7 +30,11 @@ Strip repair (`smooth_shortest_path`, eager): a crossing pulled onto an end of i
 edge means the path touches a vertex; runs of such crossings become one vertex
 node, and the path is released to either side of the vertex's fan (all contacts
 together, or one at a time), started on the unfolded straight line; the shortest
-result wins, until nothing changes.
+result wins, until nothing changes. `smooth_path` is the same repair as
+fixed-shape JAX (jit, vmap, grad; no host callback): the candidate strips of a
+round (as it is, all contacts to side 0, all to side 1, each of the first
+`max_single` contacts alone to either side) are solved in parallel under `vmap`
+in a `lax.while_loop` over rounds (`jaxgeo._smooth_repair` builds them).
 
 Differentiation. At the solution L is stationary in the free u (and the bounds do
 not depend on the mesh), so by the envelope theorem dL/dθ = ∂L/∂θ at fixed u* for
@@ -63,7 +67,9 @@ __all__ = [
     "SmoothPath",
     "phong_normals",
     "phong_point",
+    "SmoothResult",
     "smooth_geodesic",
+    "smooth_path",
     "smooth_shortest_path",
 ]
 
@@ -374,6 +380,10 @@ def _minimise(faces, strip, vertices, normals, u0, alpha, n_quad, gtol, max_step
 
 # ----------------------------------------------------------------------- entry point
 
+#: An endpoint this close (in barycentric coordinates) to an edge or vertex lies
+#: in every face round it when the strip's faces are chosen.
+_SNAP_TOL = 1e-12
+
 
 @eqx.filter_jit
 def phong_normals(
@@ -468,7 +478,7 @@ def _solve(
     dtype = mesh.vertices.dtype
     start = SurfacePoint(jnp.asarray(start.face), jnp.asarray(start.bary, dtype))
     end = SurfacePoint(jnp.asarray(end.face), jnp.asarray(end.bary, dtype))
-    snap_tol = 1e-12
+    snap_tol = _SNAP_TOL
     sg = jax.lax.stop_gradient
     strip0 = _build_strip(
         sg(mesh), sg(start), sg(end), kinds, elements, count, snap_tol
@@ -777,3 +787,175 @@ def smooth_shortest_path(
             return kept
         best = improved
     return best
+
+
+# ----------------------------------------------------------------------- JAX-native
+
+
+def _relax(mesh, nrm, start, end, kinds, elements, u0, count, alpha, n_quad, tol,
+           max_steps):  # fmt: skip
+    """`_minimise` on a strip, nothing differentiated: `(u, length, ok, faces)`,
+    ok = converged on a valid strip."""
+    strip = _build_strip(mesh, start, end, kinds, elements, count, _SNAP_TOL)
+    u, gnorm, _, _ = _minimise(
+        mesh.faces, strip, mesh.vertices, nrm, u0, alpha, n_quad, tol, max_steps
+    )
+    lens = _lengths(mesh.faces, strip, mesh.vertices, nrm, u, alpha, n_quad)
+    length = jnp.sum(lens)
+    ok = (gnorm <= tol) & strip.valid & jnp.isfinite(length)
+    return jnp.where(strip.free, u, 0.0), length, ok, strip.face
+
+
+class SmoothResult(eqx.Module):
+    """`smooth_path`'s result: the `SmoothPath` on the repaired strip, the
+    repair rounds that changed the strip, and the vertex contacts released."""
+
+    path: SmoothPath
+    rounds: Int[Array, ""]
+    releases: Int[Array, ""]
+
+    @property
+    def ok(self) -> Bool[Array, ""]:
+        """Converged on a valid strip (the pipeline's SUCCESS)."""
+        return self.path.converged & self.path.valid_strip
+
+
+def smooth_path(
+    mesh: Mesh,
+    start: SurfacePoint,
+    end: SurfacePoint,
+    kinds: Int[Array, " M"],
+    elements: Int[Array, " M"],
+    params: Float[Array, " M"],
+    count: Int[Array, ""],
+    normals: Weighting | Float[Array, "V 3"] = "uniform",
+    *,
+    boundary: Literal["fit", "keep"] = "fit",
+    alpha: float = 0.5,
+    n_quad: int = 4,
+    gtol: float = 1e-12,
+    max_steps: int = 200,
+    max_rounds: int = 8,
+    max_single: int = 4,
+) -> SmoothResult:
+    """The geodesic of the Phong surface started from a polyhedral path's strip,
+    with strip repair at vertex contacts; all in JAX (jit, vmap, grad).
+
+    **Arguments:**
+
+    - `mesh`, `start`, `end`: the mesh and the endpoints.
+    - `kinds`, `elements`, `params`, `count`: the starting path in `Path`'s format
+      (`(M,)` buffers, node 0 the start, node `count − 1` the end), e.g. the exact
+      polyhedral geodesic. M is the capacity of every strip of the repair.
+    - `normals`, `boundary`, `alpha`, `n_quad`, `gtol`, `max_steps`: as in
+      `smooth_geodesic`.
+    - `max_rounds`: repair rounds allowed (static).
+    - `max_single`: the first this many vertex contacts are also released one at
+      a time (static; each costs two candidate strips per round).
+
+    **Repair** (the same rule as `smooth_shortest_path`). After the strip is
+    solved, crossings held at an end of their edge become vertex nodes (runs at one
+    vertex one node). If there are any, candidate strips are solved in parallel
+    (`vmap`): the strip as it is, every contact released to side 0, every contact
+    to side 1, and each of the first `max_single` contacts alone to either side (a
+    side is the arc of the vertex's fan between the faces the path enters and
+    leaves by, `jaxgeo._smooth_repair`). The shortest converged candidate wins if
+    it is shorter than the strip as it is by more than rounding (≈ 1e-13
+    relative in float64); otherwise, or after `max_rounds`, the repair stops.
+
+    **Returns:** a `SmoothResult`: `path` (a `SmoothPath` of capacity M, its
+    `length` and `points` differentiable as in `smooth_geodesic`), `rounds`,
+    `releases`, `ok`.
+    """
+    dtype = mesh.vertices.dtype
+    start = SurfacePoint(jnp.asarray(start.face), jnp.asarray(start.bary, dtype))
+    end = SurfacePoint(jnp.asarray(end.face), jnp.asarray(end.bary, dtype))
+    # arrays, not static Python numbers: a new path must not recompile
+    kinds = jnp.asarray(kinds, jnp.int32).reshape(-1)
+    elements = jnp.asarray(elements, jnp.int32).reshape(-1)
+    params = jnp.asarray(params, dtype).reshape(-1)
+    count = jnp.asarray(count, jnp.int32)
+    nrm = phong_normals(mesh, normals, boundary)
+    return _smooth_path(
+        mesh, nrm, start, end, kinds, elements, params, count, alpha, n_quad, gtol,
+        max_steps, max_rounds, max_single,
+    )  # fmt: skip
+
+
+@eqx.filter_jit
+def _smooth_path(
+    mesh, nrm, start, end, kinds, elements, params, count, alpha, n_quad, gtol,
+    max_steps, max_rounds, max_single,
+):  # fmt: skip
+    from . import _smooth_repair as rep
+
+    dtype = mesh.vertices.dtype
+    sg = jax.lax.stop_gradient
+    m0, s0, e0, n0 = sg(mesh), sg(start), sg(end), sg(nrm)
+    m = kinds.shape[0]
+    idx = jnp.arange(m)
+    u0 = jnp.where(
+        (kinds == EDGE) & (idx > 0) & (idx < count - 1),
+        jnp.clip(jnp.asarray(params, dtype), 0.0, 1.0),
+        0.0,
+    )
+    tol = gtol * m0.mean_edge_length
+    eps = jnp.finfo(dtype).eps
+    better = 1.0 - 450 * eps  # 1e-13 in float64, as smooth_shortest_path
+
+    def relax(k, e, u, c):
+        return _relax(m0, n0, s0, e0, k, e, u, c, alpha, n_quad, tol, max_steps)
+
+    u, length, _, _ = relax(kinds, elements, u0, count)
+
+    def contacts(state):
+        k, e, u, c = rep.collapse(m0, *state[:4])
+        return (k, e, u, c), (k == VERTEX) & (idx > 0) & (idx < c - 1)
+
+    def cond(state):
+        _, at = contacts(state)
+        return ~state[5] & (state[6] < max_rounds) & jnp.any(at)
+
+    def body(state):
+        (k, e, u, c), at = contacts(state)
+        strip = _build_strip(m0, s0, e0, k, e, c, _SNAP_TOL)
+        arcs = rep.node_arcs(m0, s0, e0, k, e, u, c, strip.face)
+        # the choices: none, all to side 0, all to side 1, then single contacts
+        order = jnp.cumsum(at) - 1  # rank of each contact
+        rows = [jnp.full(m, -1), jnp.where(at, 0, -1), jnp.where(at, 1, -1)]
+        for j in range(max_single):
+            for side in (0, 1):
+                rows.append(jnp.where(at & (order == j), side, -1))
+        sides = jnp.stack(rows).astype(jnp.int32)
+
+        def candidate(side):
+            ck, ce, cu, cc, changed = rep.release(k, e, u, c, side, *arcs)
+            cu2, clen, cok, _ = relax(ck, ce, cu, cc)
+            return (
+                ck,
+                ce,
+                cu2,
+                cc,
+                clen,
+                cok & changed,
+                jnp.sum(side >= 0, dtype=jnp.int32),
+            )
+
+        ck, ce, cu, cc, clen, cok, cfree = jax.vmap(candidate)(sides)
+        cok = cok.at[0].set(True)
+        shorter = cok & (clen < clen[0] * better)
+        shorter = shorter.at[0].set(False)
+        best = jnp.where(
+            jnp.any(shorter), jnp.argmin(jnp.where(shorter, clen, jnp.inf)), 0
+        )
+        stop = best == 0
+        new = (ck[best], ce[best], cu[best], cc[best], clen[best])
+        return (*new, stop, state[6] + jnp.where(stop, 0, 1),
+                state[7] + jnp.where(stop, 0, cfree[best]))  # fmt: skip
+
+    state = (kinds, elements, u, count, length, jnp.bool_(False), jnp.int32(0),
+             jnp.int32(0))  # fmt: skip
+    k, e, u, c, _, _, rounds, releases = jax.lax.while_loop(cond, body, state)
+    k, e, u, c = rep.collapse(m0, k, e, u, c)
+    path = _solve(mesh, nrm, start, end, k, e, u, c, alpha, n_quad, gtol, max_steps)
+    return SmoothResult(path=path, rounds=rounds, releases=releases)
