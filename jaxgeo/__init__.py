@@ -5,6 +5,7 @@ from .batch import shortest_paths as shortest_paths
 from .geodesic import path_length as path_length, shortest_path as shortest_path
 from .locate import SurfacePoint as SurfacePoint, locate as locate
 from .mesh import Mesh as Mesh, load_mesh as load_mesh
+from .methods import Exact as Exact, Laser as Laser, Smooth as Smooth
 from .normals import vertex_normals as vertex_normals
 from .path import Path as Path, Status as Status
 from .trace import TraceOptions as TraceOptions

@@ -99,7 +99,8 @@ def check_arguments(
         if not float(d) > 0:  # also catches NaN
             raise JaxgeoError(f"max_distance must be positive, got {float(d)}")
     _check_bool("throw", throw)
-    check_mesh_vertices(mesh)
+    if mesh is not None:
+        check_mesh_vertices(mesh)
 
 
 def check_batch_options(

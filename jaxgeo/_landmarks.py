@@ -36,7 +36,10 @@ def landmark_forests(
     v = vertices.astype(np.float64)
     w = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
     graph = sp.coo_matrix(
-        (np.concatenate([w, w]), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+        (
+            np.concatenate([w, w]),
+            (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]]),
+        ),
         shape=(n, n),
     ).tocsr()
     used = vertex_component >= 0

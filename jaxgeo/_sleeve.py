@@ -145,7 +145,9 @@ def unfold(
         .at[jnp.where(live, ri, cap)]
         .max(big, mode="drop")
     )
-    is_left = jnp.zeros(cap + 1, bool).at[jnp.where(live, li, cap)].set(True, mode="drop")
+    is_left = (
+        jnp.zeros(cap + 1, bool).at[jnp.where(live, li, cap)].set(True, mode="drop")
+    )
 
     # the endpoints, from the barycentric coordinates of the first/last face
     a2 = jnp.stack([ax, ay])  # portal 0 frame: forward is −y, f_0 behind
@@ -202,7 +204,9 @@ def lane_loop(cond, body, state):
     return jax.lax.while_loop(lambda s: jnp.any(active(s)), step, state)
 
 
-def funnel(sleeves: Sleeve) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
+def funnel(
+    sleeves: Sleeve,
+) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
     """The shortest path inside each sleeve of a lane batch (the funnel algorithm
     of Lee & Preparata, in the form of Mononen's "simple stupid funnel"): the
     instance ids of the points where it bends, `START` first and `END` last, their

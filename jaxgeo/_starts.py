@@ -120,11 +120,15 @@ def corridor_from_vertices(
         q = jnp.argmax(mesh.fan_spokes[v] == w)  # spoke to the next vertex
         has_q = jnp.any(mesh.fan_spokes[v] == w)
         p_end = _face_pos(mesh, end_face, v)
-        to_ccw = jnp.where(last, p_end, jnp.where(closed, (q - 1) % jnp.maximum(n, 1), q - 1))
+        to_ccw = jnp.where(
+            last, p_end, jnp.where(closed, (q - 1) % jnp.maximum(n, 1), q - 1)
+        )
         to_cw = jnp.where(last, p_end, q)
         d, c, turn_ok = _turn(n, closed, p_e, to_ccw, to_cw)
         exit_pos = jnp.where(d > 0, to_ccw, to_cw)
-        exit_face = mesh.fan_faces[v, jnp.clip(exit_pos, 0, mesh.fan_faces.shape[1] - 1)]
+        exit_face = mesh.fan_faces[
+            v, jnp.clip(exit_pos, 0, mesh.fan_faces.shape[1] - 1)
+        ]
         nxt = _face_pos(mesh, exit_face, w)
         return (
             jnp.where(last, p_e, nxt),

@@ -1,8 +1,9 @@
 """Many geodesics at once: `shortest_paths`, chunked, vmapped and sharded.
 
 A batch of endpoint pairs is cut into chunks of a fixed size (the last one padded),
-so every chunk has the same shape and the solver compiles once. Each chunk runs as
-one `jax.vmap` of the single-path solver. With several devices, each chunk's batch
+so every chunk has the same shape and the solver compiles once. Each chunk runs
+through the same pipeline as a single path (`geodesic.solve`), its pairs as lanes
+of one compiled loop. With several devices, each chunk's batch
 axis is split across them with `jax.sharding` (the mesh is replicated); the chunk
 size is rounded up to a multiple of the device count.
 """
@@ -21,46 +22,30 @@ from jaxtyping import ArrayLike
 
 from ._checks import check_arguments, check_batch_options, check_point_batch
 from ._errors import JaxgeoError
-from .geodesic import (
-    Method,
-    _as_surface_point,
-    _finish_method,
-    _initial_status,
-    _validate_options,
-)
+from .geodesic import as_surface_point, solve
 from .locate import DEFAULT_MAX_DISTANCE
 from .mesh import Mesh
-from .normals import Weighting, vertex_normals
+from .methods import Method, as_method
+from .normals import Weighting
 from .path import Path, Status
-from .trace import TraceOptions, trace_batch
 
 #: Endpoints located together by `jax.lax.map` in `_solve_chunk`.
 _LOCATE_BATCH = 4
 
 
 @eqx.filter_jit
-def _solve_chunk(mesh, p1, p2, max_distance, weighting, options, method):
+def _solve_chunk(mesh, p1, p2, max_distance, method, max_points):
     # Locating scans every face's bounding sphere once per point. Vmapped over a
     # whole chunk its (chunk, faces) temporaries leave the cache: 256 points on a
     # 20k-face mesh took 123 ms vmapped, 76 ms as `lax.map` in groups of 4.
     def locate_all(points):
         return jax.lax.map(
-            lambda p: _as_surface_point(mesh, p), points, batch_size=_LOCATE_BATCH
+            lambda p: as_surface_point(mesh, p), points, batch_size=_LOCATE_BATCH
         )
 
     (start, d1), (end, d2) = locate_all(p1), locate_all(p2)
-    initial = jax.vmap(_initial_status, in_axes=(None, 0, 0, 0, 0, None))(
-        mesh, start, end, d1, d2, max_distance
-    )
-    normals = vertex_normals(mesh.vertices, mesh.faces, weighting)
-    traced = trace_batch(mesh, normals, start, end, options, initial)
-    if method == "laser":
-        return traced  # leaves as numpy (not differentiable): no replay needed
-
-    def finish(s, e, t, i):
-        return _finish_method(mesh, normals, s, e, t, i, False, method)
-
-    return jax.vmap(finish)(start, end, traced, initial)
+    # leaves as numpy afterwards: nothing differentiates them, so no replay
+    return solve(mesh, start, end, d1, d2, max_distance, method, max_points, False)
 
 
 def _gather(x) -> np.ndarray:
@@ -85,10 +70,10 @@ def shortest_paths(
     p1: ArrayLike,
     p2: ArrayLike,
     *,
-    method: Method = "laser",
-    candidates: Literal["local", "all"] = "local",
+    method: Method = "exact",
+    candidates: Literal["local", "all"] | None = None,
     max_points: int = 1024,
-    normals: Weighting = "uniform",
+    normals: Weighting | None = None,
     max_distance: float = DEFAULT_MAX_DISTANCE,
     chunk_size: int = 256,
     shard: bool = True,
@@ -112,8 +97,15 @@ def shortest_paths(
     """
     if not isinstance(mesh, Mesh):
         raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
-    _validate_options(method)
-    check_arguments(mesh, candidates, max_points, normals, max_distance, throw)
+    check_arguments(
+        mesh,
+        candidates or "local",
+        max_points,
+        normals or "uniform",
+        max_distance,
+        throw,
+    )
+    m = as_method(method, candidates=candidates, normals=normals)
     check_batch_options(chunk_size, shard, progress)
     a, b = check_point_batch("p1", p1), check_point_batch("p2", p2)
     if a.shape != b.shape:
@@ -129,7 +121,6 @@ def shortest_paths(
     if sharding is not None:
         n_dev = sharding.mesh.size
         chunk_size = -(-chunk_size // n_dev) * n_dev
-    options = TraceOptions(candidates=candidates, max_points=max_points)
     dtype = mesh.vertices.dtype
     limit = jnp.asarray(max_distance, dtype)  # an array: no recompile per value
     pieces = []
@@ -139,7 +130,7 @@ def shortest_paths(
         ca, cb = jnp.asarray(a[idx], dtype), jnp.asarray(b[idx], dtype)
         if sharding is not None:
             ca, cb = jax.device_put(ca, sharding), jax.device_put(cb, sharding)
-        paths = _solve_chunk(mesh, ca, cb, limit, normals, options, method)
+        paths = _solve_chunk(mesh, ca, cb, limit, m, max_points)
         pieces.append(jax.tree.map(lambda x, k=stop - start: _gather(x)[:k], paths))
         if progress is not None:
             progress(stop, n)

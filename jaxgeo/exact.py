@@ -111,7 +111,9 @@ def _contains(mesh: Mesh, end: _End, faces):
     return (faces >= 0) & jnp.where(
         end.kind == VERTEX,
         on_vertex,
-        jnp.where(end.kind == EDGE, (faces == ef[0]) | (faces == ef[1]), faces == end.index),
+        jnp.where(
+            end.kind == EDGE, (faces == ef[0]) | (faces == ef[1]), faces == end.index
+        ),
     )
 
 
@@ -265,7 +267,9 @@ def _pinned_xy(sleeve: _sleeve.Sleeve, pinned):
     return jnp.where(
         (pinned == _sleeve.START)[:, None],
         sleeve.start_xy,
-        jnp.where((pinned == _sleeve.END)[:, None], sleeve.end_xy, sleeve.inst_xy[inst]),
+        jnp.where(
+            (pinned == _sleeve.END)[:, None], sleeve.end_xy, sleeve.inst_xy[inst]
+        ),
     )
 
 
@@ -319,9 +323,9 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
             lambda c, sl_, p, m_: _flips(mesh, theta, c, sl_, p, m_, tol)
         )(lane.corridor, sl, pinned, m)
         n_taken = jnp.sum(taken, axis=-1, dtype=jnp.int32)
-        new, new_n, fits = lanes_v(
-            lambda *x: _apply_flips(mesh, *x)
-        )(lane.corridor, lane.n, taken, v, a, b, p0, d, count)
+        new, new_n, fits = lanes_v(lambda *x: _apply_flips(mesh, *x))(
+            lane.corridor, lane.n, taken, v, a, b, p0, d, count
+        )
         new, new_n = _clean(mesh, new, new_n, s, t)
         good = sl.valid & fun_ok
         converged = good & (n_taken == 0)
@@ -475,7 +479,10 @@ def exact_solve(
     cap = corridor_capacity or max_points
     dtype = mesh.vertices.dtype
     tol = 10 * float(jnp.finfo(dtype).eps) ** 0.5
-    s, t = jax.vmap(lambda p: _end(mesh, p))(start), jax.vmap(lambda p: _end(mesh, p))(end)
+    s, t = (
+        jax.vmap(lambda p: _end(mesh, p))(start),
+        jax.vmap(lambda p: _end(mesh, p))(end),
+    )
     sg = jax.lax.stop_gradient
     smesh = sg(mesh)
     ss, ts = sg(s), sg(t)
@@ -509,9 +516,9 @@ def exact_solve(
         starts_converged=jnp.sum(good, axis=1, dtype=jnp.int32),
         corridor_length=win.n,
     )
-    return jax.vmap(
-        lambda *a: _finish(mesh, *a, max_points)
-    )(start, end, s, t, win.corridor, win.n, status, stats)
+    return jax.vmap(lambda *a: _finish(mesh, *a, max_points))(
+        start, end, s, t, win.corridor, win.n, status, stats
+    )
 
 
 def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):
@@ -536,7 +543,9 @@ def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):
     status = jnp.where(ok & (count > max_points), Status.MAX_STEPS, status)
     zero = jnp.zeros((), jnp.int32)
     stats = jax.tree.map(lambda x: jnp.where(direct, zero, x), stats)
-    stats = eqx.tree_at(lambda x: x.corridor_length, stats, jnp.where(direct, 1, stats.corridor_length))
+    stats = eqx.tree_at(
+        lambda x: x.corridor_length, stats, jnp.where(direct, 1, stats.corridor_length)
+    )
     return ExactResult(
         points=P3,
         kinds=K,

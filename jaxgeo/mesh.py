@@ -327,7 +327,9 @@ class Mesh(eqx.Module):
     landmark_dist: Float[Array, "M V"]
     landmark_root: Int[Array, "M V"]
 
-    def __init__(self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS):
+    def __init__(
+        self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS
+    ):
         v, f = _check_arrays(vertices, faces)
         _check_faces(v, f)
         edges, edge_faces, face_edges, consistent = _edges(f)

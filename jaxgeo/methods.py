@@ -8,6 +8,7 @@ API calls it with a batch of one, `shortest_paths` with a chunk.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Literal
 
 import equinox as eqx
@@ -74,27 +75,61 @@ class Laser(eqx.Module):
         normals = vertex_normals(mesh.vertices, mesh.faces, self.normals)
         options = TraceOptions(candidates=self.candidates, max_points=max_points)
         sg = jax.lax.stop_gradient
-        traced = trace_batch(sg(mesh), sg(normals), sg(start), sg(end), options, initial)
+        traced = trace_batch(
+            sg(mesh), sg(normals), sg(start), sg(end), options, initial
+        )
         if differentiable:
             traced = jax.vmap(lambda s, e, t: replay(mesh, normals, s, e, t))(
                 start, end, traced
             )
         stats = {"branch_points": jnp.sum(traced.branch, axis=-1, dtype=jnp.int32)}
-        return eqx.tree_at(lambda p: p.stats, traced, stats, is_leaf=lambda x: x is None)
+        return dataclasses.replace(traced, stats=stats)
 
 
 class Smooth(eqx.Module):
     """The geodesic of the smooth surface the Phong normals define (Phong
-    tessellation, α = ½; `jaxgeo.smooth`), started from the exact path.
-    `normals`: vertex-normal weighting."""
+    tessellation, α = ½; `jaxgeo.smooth`), started from the exact path's strip and
+    repaired at vertex contacts, all in JAX. `normals`: vertex-normal weighting;
+    `max_rounds`: strip repair rounds."""
 
     normals: Weighting = "uniform"
+    max_rounds: int = 8
+    exact: Exact = Exact()
 
     def solve(self, mesh, start, end, initial, max_points, differentiable) -> Path:
-        from .smooth import smooth_from_exact
+        from .smooth import smooth_path
 
-        exact = Exact().solve(mesh, start, end, initial, max_points, differentiable)
-        return smooth_from_exact(mesh, start, end, exact, self.normals)
+        ex = self.exact.solve(mesh, start, end, initial, max_points, differentiable)
+        normals = vertex_normals(mesh.vertices, mesh.faces, self.normals)
+
+        def one(s, e, k, el, u, c):
+            return smooth_path(
+                mesh, s, e, k, el, u, c, normals, max_rounds=self.max_rounds
+            )
+
+        r = jax.vmap(one)(start, end, ex.kinds, ex.elements, ex.params, ex.count)
+        ok = ex.status == Status.SUCCESS
+        good = ok & r.ok
+        sp = r.path
+
+        def pick(a, b):
+            g = good.reshape(good.shape + (1,) * (a.ndim - 1))
+            return jnp.where(g, a, b)
+
+        stats = dict(ex.stats, repair_rounds=r.rounds, releases=r.releases)
+        return Path(
+            points=pick(sp.points, ex.points),
+            kinds=pick(sp.kinds, ex.kinds),
+            elements=pick(sp.elements, ex.elements),
+            params=pick(sp.params, ex.params),
+            branch=ex.branch,
+            count=pick(sp.count, ex.count),
+            length=pick(sp.length, ex.length),
+            status=jnp.where(ok & ~r.ok, Status.REFINE_FAILED, ex.status).astype(
+                jnp.int32
+            ),
+            stats=stats,
+        )
 
 
 AnyMethod = Exact | Laser | Smooth
@@ -109,6 +144,13 @@ def as_method(method: Method, **legacy) -> AnyMethod:
     `candidates=`/`normals=` arguments of `shortest_path`) fill options a name
     leaves at their defaults."""
     if isinstance(method, Exact | Laser | Smooth):
+        from ._checks import check_arguments
+
+        check_arguments(
+            None,
+            getattr(method, "candidates", "local"),
+            normals=getattr(method, "normals", "uniform"),
+        )
         return method
     if not isinstance(method, str) or method not in _BY_NAME:
         raise JaxgeoError(
