@@ -7,6 +7,7 @@ from .locate import SurfacePoint as SurfacePoint, locate as locate
 from .mesh import Mesh as Mesh, load_mesh as load_mesh
 from .normals import vertex_normals as vertex_normals
 from .path import Path as Path, Status as Status
+from .repair import RepairReport as RepairReport, repair_mesh as repair_mesh
 from .trace import TraceOptions as TraceOptions
 
 __version__ = "0.1.0"
