@@ -41,6 +41,19 @@ DEGENERATE_AREA_RATIO = 1e-8
 _ZERO_AREA_RATIO = 64 * float(np.finfo(np.float64).eps)
 
 
+def _unique_pairs(pairs: np.ndarray, **kwargs):
+    """`np.unique(pairs, axis=0, ...)` for `(N, 2)` non-negative integers, through
+    one int64 key per row (a 1-D sort: ~20x faster than sorting rows)."""
+    pairs = np.asarray(pairs, dtype=np.int64)
+    base = int(pairs.max()) + 1 if pairs.size else 1
+    if base > 3_000_000_000:  # base² would overflow int64
+        return np.unique(pairs, axis=0, **kwargs)
+    out = np.unique(pairs[:, 0] * base + pairs[:, 1], **kwargs)
+    first, *rest = out if isinstance(out, tuple) else (out,)
+    first = np.stack(np.divmod(first, base), axis=1)
+    return (first, *rest) if rest else first
+
+
 def _fail(problem: str, indices: Any = None, *, limit: int = 10) -> None:
     """Raise `JaxgeoError(problem)`, listing up to `limit` indices (or index pairs
     when `indices` is 2-D)."""
@@ -195,9 +208,7 @@ def _edges(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     n_faces = f.shape[0]
     half = np.stack([f[:, [1, 2, 0]], f[:, [2, 0, 1]]], axis=-1).reshape(-1, 2)
     key = np.sort(half, axis=1)
-    edges, inverse, counts = np.unique(
-        key, axis=0, return_inverse=True, return_counts=True
-    )
+    edges, inverse, counts = _unique_pairs(key, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     if (counts > 2).any():
         _fail(
@@ -215,7 +226,7 @@ def _edges(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     edge_faces[sorted_edges, slot] = face_of_half[order]
     # Orientation: the two faces of an interior edge must run through it in
     # opposite directions.
-    directed = np.unique(half, axis=0, return_counts=True)[1]
+    directed = _unique_pairs(half, return_counts=True)[1]
     consistent = not (directed > 1).any()
     face_edges = inverse.reshape(n_faces, 3)
     return edges, edge_faces, face_edges, consistent
@@ -233,7 +244,7 @@ def _corner_fans(f: np.ndarray) -> np.ndarray:
     end_a, end_b = 3 * face + (i + 1) % 3, 3 * face + (i + 2) % 3
     va, vb = f.ravel()[end_a], f.ravel()[end_b]
     key = np.sort(np.stack([va, vb], axis=1), axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = _unique_pairs(key, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     order = np.argsort(inverse, kind="stable")
     # the two half-edges of each two-face edge are consecutive in `order`
@@ -249,7 +260,7 @@ def _corner_fans(f: np.ndarray) -> np.ndarray:
 
 def _fan_counts(f: np.ndarray, n_vertices: int) -> np.ndarray:
     """How many fans of faces each vertex has (0 for an unused vertex)."""
-    fans = np.unique(np.stack([f.ravel(), _corner_fans(f)]), axis=1)[0]
+    fans = _unique_pairs(np.stack([f.ravel(), _corner_fans(f)], axis=1))[:, 0]
     return np.bincount(fans, minlength=n_vertices)
 
 
@@ -661,8 +672,10 @@ def _utf8(data: bytes) -> bytes:
 
 def _stl_bytes(data: bytes, path: str) -> bytes:
     """Check a binary STL's triangle count against its length (84-byte header,
-    then 50 bytes per triangle) and repair the two harmless mismatches: a wrong
-    count over a whole number of triangles, and trailing bytes after them."""
+    then 50 bytes per triangle). Two mismatches are harmless and read with a
+    warning: a count of 0 over whole triangles (some exporters never fill it in)
+    and bytes after the counted triangles; a count the file does not hold is
+    refused (the file is truncated, or the count is garbage)."""
     n = len(data)
     count = int.from_bytes(data[80:84], "little") if n >= 84 else -1
     if count >= 0 and n == 84 + 50 * count:
@@ -681,10 +694,10 @@ def _stl_bytes(data: bytes, path: str) -> bytes:
             stacklevel=_caller_stacklevel(),
         )
         return data[: 84 + 50 * count]
-    if (n - 84) % 50 == 0 and n > 84:
-        held = (n - 84) // 50
+    held, rest = divmod(n - 84, 50)
+    if count == 0 and held > 0 and rest == 0:
         warnings.warn(
-            f"binary STL {path}: the header says {count} triangles but the file "
+            f"binary STL {path}: the header says 0 triangles but the file "
             f"holds {held}; reading {held}",
             stacklevel=_caller_stacklevel(),
         )
@@ -692,6 +705,7 @@ def _stl_bytes(data: bytes, path: str) -> bytes:
     _fail(
         f"binary STL {path} is truncated or corrupt: its header says {count} "
         f"triangles ({84 + 50 * count} bytes) but the file has {n} bytes"
+        + (f" ({held} whole triangles)" if rest == 0 else "")
     )
     raise AssertionError  # unreachable: _fail raises
 
@@ -703,7 +717,7 @@ def _problem_vertices(f: np.ndarray, n_vertices: int) -> np.ndarray:
     bad = np.zeros(n_vertices, bool)
     bad[f[_repeated_mask(f) | _duplicate_mask(f)].ravel()] = True
     half = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
-    edges, counts = np.unique(half, axis=0, return_counts=True)
+    edges, counts = _unique_pairs(half, return_counts=True)
     bad[edges[counts > 2].ravel()] = True
     bad[_fan_counts(f, n_vertices) > 1] = True
     return bad

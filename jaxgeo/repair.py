@@ -8,12 +8,18 @@ the criteria `Mesh` validates by, so its output passes them:
 
 1. degenerate faces (a repeated vertex, zero area, or a needle below
    `jaxgeo.mesh.DEGENERATE_AREA_RATIO`) are removed;
-2. of faces with the same three vertices, the first is kept;
-3. on an edge of more than two faces, the smallest faces are removed until two
-   remain (MeshLab's "Repair non Manifold Edges by removing faces" rule: a fin
-   or a stray triangle is usually smaller than the surface it sticks to);
-4. a vertex whose faces form several fans is split into one copy per fan (the
-   fan with the vertex's first corner keeps its index, copies are appended).
+2. of faces with the same three vertices, the first is kept, except where they
+   come in both orientations and the kept one's edges would still have more
+   than two faces: a wall between two solids that touch (STL and voxel exports
+   of assemblies), where both copies go and the solids become one;
+3. a vertex whose faces form several fans (linked across edges of two faces) is
+   split into one copy per fan, the fan with the vertex's first corner keeping
+   its index: this separates bow-ties, and sheets or solids that touch along an
+   edge of more than two faces (an STL of boxes that share edges);
+4. on an edge that still has more than two faces (its faces are linked around
+   both ends), the smallest faces are removed until two remain (MeshLab's
+   "Repair non Manifold Edges by removing faces" rule: a stray triangle is
+   usually smaller than the surface it sticks to), and 3. is applied again.
 
 Vertex indices of the input stay valid (vertices are only appended, never
 removed or renumbered); `RepairReport.faces` maps the output faces to the input's.
@@ -32,7 +38,13 @@ import numpy as np
 from jaxtyping import Float, Int
 
 from ._errors import JaxgeoError
-from .mesh import _caller_stacklevel, _check_arrays, _corner_fans, _degenerate_mask
+from .mesh import (
+    _caller_stacklevel,
+    _check_arrays,
+    _corner_fans,
+    _degenerate_mask,
+    _unique_pairs,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,6 +92,32 @@ class RepairReport:
         return "; ".join(f"{n} {what}" for n, what in parts if n)
 
 
+def _edge_counts(f: np.ndarray) -> np.ndarray:
+    """For each face, the most faces any of its edges has."""
+    half = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
+    _, edge, counts = _unique_pairs(half, return_inverse=True, return_counts=True)
+    return counts[edge.ravel()].reshape(3, -1).max(axis=0)
+
+
+def _unique_faces(f: np.ndarray) -> np.ndarray:
+    """Indices of the faces to keep of each set with the same three vertices: the
+    first; none where the set holds both orientations and the kept face's edges
+    would have more than two faces (a wall between two solids that touch: both
+    copies go, and the solids become one)."""
+    key = np.sort(f, axis=1)
+    # a face runs the same way round as its sorted key iff it is a rotation of it
+    even = (np.roll(key, 1, axis=1) == f).all(1) | (np.roll(key, 2, axis=1) == f).all(1)
+    even |= (key == f).all(1)
+    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    group = group.ravel()
+    both = np.zeros(first.size, bool)
+    both[group[even]] = True
+    both &= np.isin(np.arange(first.size), group[~even])
+    first = np.sort(first)
+    wall = both[group[first]] & (_edge_counts(f[first]) > 2)
+    return first[~wall]
+
+
 def _nonmanifold_excess(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Faces to remove so that no edge has more than two faces: on each edge of
     three or more, all but its two largest (ties: the earlier face stays)."""
@@ -95,9 +133,7 @@ def _nonmanifold_excess(v: np.ndarray, f: np.ndarray) -> np.ndarray:
             axis=1,
         )
         face = np.tile(live, 3)
-        _, edge, counts = np.unique(
-            half, axis=0, return_inverse=True, return_counts=True
-        )
+        _, edge, counts = _unique_pairs(half, return_inverse=True, return_counts=True)
         edge = edge.ravel()
         over = counts[edge] > 2
         if not over.any():
@@ -109,9 +145,9 @@ def _nonmanifold_excess(v: np.ndarray, f: np.ndarray) -> np.ndarray:
         drop[face[rank >= 2]] = True
 
 
-def _split_fans(f: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """One vertex per fan: returns the faces, the input vertex of each appended
-    copy, and how many vertices were split."""
+def _split_fans(f: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """One vertex per fan (the fan holding a vertex's first corner keeps its
+    index): returns the faces and the input vertex of each appended copy."""
     labels = _corner_fans(f)
     corner_vertex = f.ravel()
     # fans of each vertex, ordered by the fan's first corner
@@ -128,8 +164,7 @@ def _split_fans(f: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray,
     new_index = np.empty(labels.max() + 1, np.int64)
     new_index[fans] = owner
     new_index[fans[extra]] = n_vertices + np.arange(int(extra.sum()))
-    faces = new_index[labels].reshape(f.shape)
-    return faces, owner[extra], int(np.unique(owner[extra]).size)
+    return new_index[labels].reshape(f.shape), owner[extra]
 
 
 def repair_mesh(
@@ -154,22 +189,32 @@ def repair_mesh(
     kept = np.arange(f.shape[0])
     degenerate = _degenerate_mask(v, f)
     kept = kept[~degenerate]
-    _, first = np.unique(np.sort(f[kept], axis=1), axis=0, return_index=True)
-    duplicate = kept.size - first.size
-    kept = kept[np.sort(first)]
-    excess = _nonmanifold_excess(v, f[kept])
-    kept = kept[~excess]
     if kept.size == 0:
         raise JaxgeoError(
             f"repair_mesh: no face is left: all {f.shape[0]} faces are degenerate"
         )
-    out_f, copies, split = _split_fans(f[kept], v.shape[0])
-    out_v = np.concatenate([v, v[copies]]) if copies.size else v
+    n_kept = kept.size
+    kept = kept[_unique_faces(f[kept])]
+    duplicate = n_kept - kept.size
+    # sheets that touch at a vertex or along an edge: one vertex per fan
+    split_f, copies = _split_fans(f[kept], v.shape[0])
+    owner = np.concatenate([np.arange(v.shape[0]), copies])
+    excess = _nonmanifold_excess(v[owner], split_f)
+    kept, split_f = kept[~excess], split_f[~excess]
+    out_f, more = _split_fans(split_f, owner.size)
+    owner = np.concatenate([owner, owner[more]])
+    # the appended copies that still have faces, numbered after the input's
+    keep = np.arange(owner.size) < v.shape[0]
+    keep[out_f.ravel()] = True
+    out_f = (np.cumsum(keep) - 1)[out_f]
+    owner = owner[keep]
+    copies = owner[v.shape[0] :]
+    out_v = v[owner]
     report = RepairReport(
         degenerate_faces=int(degenerate.sum()),
         duplicate_faces=int(duplicate),
         nonmanifold_faces=int(excess.sum()),
-        split_vertices=split,
+        split_vertices=int(np.unique(copies).size),
         added_vertices=int(copies.size),
         faces=kept,
     )
