@@ -15,7 +15,7 @@ import os
 import re
 import sys
 import warnings
-from typing import Any
+from typing import Any, Literal
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -465,7 +465,10 @@ class Mesh(eqx.Module):
 
 
 def load_mesh(
-    path: str | os.PathLike, *, merge_vertices: bool = True, repair: bool = False
+    path: str | os.PathLike,
+    *,
+    merge_vertices: bool = True,
+    repair: bool | Literal["split", "remove"] = False,
 ) -> Mesh:
     """Read a triangle mesh file (OBJ, PLY, STL, OFF, … anything trimesh reads).
 
@@ -478,9 +481,10 @@ def load_mesh(
       a point or along an edge, solids that share a face): those vertices are
       kept apart, with a warning naming them. The first occurrence keeps its
       place, so files without duplicates keep their vertex numbering.
-    - `repair`: then remove degenerate, duplicate and non-manifold-edge faces and
-      split bow-tie vertices (`jaxgeo.repair_mesh`), with a warning saying what
-      changed.
+    - `repair`: then remove degenerate and duplicate faces, separate the faces
+      of non-manifold edges and split bow-tie vertices (`jaxgeo.repair_mesh`;
+      `"remove"` removes the smallest faces of non-manifold edges instead), with
+      a warning saying what changed.
 
     Polygons (quads, …) are triangulated by trimesh. The result is validated by
     `Mesh`.
@@ -550,7 +554,10 @@ def load_mesh(
         if repair:
             from .repair import repair_mesh
 
-            vertices, faces, report = repair_mesh(vertices, faces, warn=False)
+            how = "split" if repair is True else repair
+            vertices, faces, report = repair_mesh(
+                vertices, faces, nonmanifold=how, warn=False
+            )
             if report.changed:
                 warnings.warn(
                     f"repaired {path}: {report}", stacklevel=_caller_stacklevel()

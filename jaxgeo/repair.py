@@ -12,14 +12,20 @@ the criteria `Mesh` validates by, so its output passes them:
    come in both orientations and the kept one's edges would still have more
    than two faces: a wall between two solids that touch (STL and voxel exports
    of assemblies), where both copies go and the solids become one;
-3. a vertex whose faces form several fans (linked across edges of two faces) is
-   split into one copy per fan, the fan with the vertex's first corner keeping
-   its index: this separates bow-ties, and sheets or solids that touch along an
-   edge of more than two faces (an STL of boxes that share edges);
-4. on an edge that still has more than two faces (its faces are linked around
-   both ends), the smallest faces are removed until two remain (MeshLab's
-   "Repair non Manifold Edges by removing faces" rule: a stray triangle is
-   usually smaller than the surface it sticks to), and 3. is applied again.
+3. edges of more than two faces (sheets or solids that touch along an edge, a
+   fin, a wall inside a solid), by `nonmanifold`:
+   - `"split"` (default): every vertex whose faces form several fans (linked
+     across edges of two faces) is split into one copy per fan, the fan with the
+     vertex's first corner keeping its index. A fan is a strip of faces, so it
+     holds at most two faces of any edge through its vertex: this separates
+     every such edge, and bow-ties, without removing a face;
+   - `"remove"`: on each such edge the smallest faces are removed until two
+     remain (MeshLab's "Repair non Manifold Edges by removing faces": a stray
+     triangle is usually smaller than the surface it sticks to); then bow-ties
+     are split as above.
+   Split keeps touching solids whole (an STL of 668 cubes that share edges loads
+   as 668 closed cubes; remove takes 1312 of its faces) but opens a solid along
+   a wall inside it, which remove closes again.
 
 Vertex indices of the input stay valid (vertices are only appended, never
 removed or renumbered); `RepairReport.faces` maps the output faces to the input's.
@@ -32,7 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from jaxtyping import Float, Int
@@ -168,15 +174,21 @@ def _split_fans(f: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]
 
 
 def repair_mesh(
-    vertices: Any, faces: Any, *, warn: bool = True
+    vertices: Any,
+    faces: Any,
+    *,
+    nonmanifold: Literal["split", "remove"] = "split",
+    warn: bool = True,
 ) -> tuple[Float[np.ndarray, "V2 3"], Int[np.ndarray, "F2 3"], RepairReport]:
-    """Remove degenerate, duplicate and non-manifold-edge faces and split bow-tie
-    vertices (see the module docstring for the rules).
+    """Remove degenerate and duplicate faces, separate (or remove) the faces of
+    non-manifold edges and split bow-tie vertices (module docstring: the rules).
 
     **Arguments:**
 
     - `vertices`, `faces`: `(V, 3)` coordinates and `(F, 3)` vertex indices, as
       for `Mesh`.
+    - `nonmanifold`: `"split"` or `"remove"`: how edges of more than two faces
+      are repaired (module docstring, step 3).
     - `warn`: emit a `UserWarning` saying what changed (when anything did).
 
     **Returns** `(vertices, faces, report)`: numpy arrays ready for `Mesh`, and a
@@ -185,6 +197,10 @@ def repair_mesh(
     **Raises** `JaxgeoError` for input `Mesh` would refuse for other reasons than
     these (shapes, dtypes, NaN or infinite coordinates, out-of-range indices).
     """
+    if nonmanifold not in ("split", "remove"):
+        raise JaxgeoError(
+            f"nonmanifold must be 'split' or 'remove', not {nonmanifold!r}"
+        )
     v, f = _check_arrays(vertices, faces)
     kept = np.arange(f.shape[0])
     degenerate = _degenerate_mask(v, f)
@@ -196,20 +212,12 @@ def repair_mesh(
     n_kept = kept.size
     kept = kept[_unique_faces(f[kept])]
     duplicate = n_kept - kept.size
-    # sheets that touch at a vertex or along an edge: one vertex per fan
-    split_f, copies = _split_fans(f[kept], v.shape[0])
-    owner = np.concatenate([np.arange(v.shape[0]), copies])
-    excess = _nonmanifold_excess(v[owner], split_f)
-    kept, split_f = kept[~excess], split_f[~excess]
-    out_f, more = _split_fans(split_f, owner.size)
-    owner = np.concatenate([owner, owner[more]])
-    # the appended copies that still have faces, numbered after the input's
-    keep = np.arange(owner.size) < v.shape[0]
-    keep[out_f.ravel()] = True
-    out_f = (np.cumsum(keep) - 1)[out_f]
-    owner = owner[keep]
-    copies = owner[v.shape[0] :]
-    out_v = v[owner]
+    excess = np.zeros(kept.size, bool)
+    if nonmanifold == "remove":
+        excess = _nonmanifold_excess(v, f[kept])
+        kept = kept[~excess]
+    out_f, copies = _split_fans(f[kept], v.shape[0])
+    out_v = np.concatenate([v, v[copies]])
     report = RepairReport(
         degenerate_faces=int(degenerate.sum()),
         duplicate_faces=int(duplicate),
