@@ -481,7 +481,8 @@ def load_mesh(
       a point or along an edge, solids that share a face): those vertices are
       kept apart, with a warning naming them. The first occurrence keeps its
       place, so files without duplicates keep their vertex numbering.
-    - `repair`: then remove degenerate and duplicate faces, separate the faces
+    - `repair`: merge every position (when `merge_vertices`), then remove
+      degenerate and duplicate faces, separate the faces
       of non-manifold edges and split bow-tie vertices (`jaxgeo.repair_mesh`;
       `"remove"` removes the smallest faces of non-manifold edges instead), with
       a warning saying what changed.
@@ -547,7 +548,8 @@ def load_mesh(
     if faces.size == 0:
         _fail(f"mesh file {path} holds no triangles")
     if merge_vertices and vertices.ndim == 2 and faces.dtype.kind in "iu":
-        vertices, faces, apart = _merge_coincident(vertices, faces)
+        # repair separates what a plain merge joins wrongly, and more (walls)
+        vertices, faces, apart = _merge_coincident(vertices, faces, safe=not repair)
         if apart:
             _warn_kept_apart(path, apart)
     try:
@@ -578,7 +580,9 @@ def _obj_text(data: bytes, path: str) -> bytes:
     bad = _OBJ_ZERO_INDEX.search(data)
     if bad:
         line = data.count(b"\n", 0, bad.start()) + 1
-        text = bad.group().decode("utf-8", "replace").strip()
+        end = data.find(b"\n", bad.start())
+        text = data[bad.start() : None if end < 0 else end]
+        text = text.decode("utf-8", "replace").strip()
         n = len(_OBJ_ZERO_INDEX.findall(data))
         _fail(
             f"OBJ file {path} has a face with vertex index 0 on line {line} "
@@ -731,7 +735,7 @@ def _problem_vertices(f: np.ndarray, n_vertices: int) -> np.ndarray:
 
 
 def _merge_coincident(
-    v: np.ndarray, f: np.ndarray
+    v: np.ndarray, f: np.ndarray, *, safe: bool = True
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Merge vertices with equal coordinates, but never into an invalid mesh.
 
@@ -746,6 +750,9 @@ def _merge_coincident(
     non-manifold edge, a duplicate face, a pinch) are not merged at all. Each
     resulting vertex is a set of original vertices at one position, numbered by
     its first occurrence, so a file without duplicates keeps its numbering.
+
+    With `safe=False` every position becomes one vertex (for `repair_mesh`, whose
+    fan split does the same separation and also joins solids that share a face).
 
     Returns the vertices, the faces, and the groups of resulting vertices that
     share a position but were kept apart. Files with out-of-range indices are
@@ -764,7 +771,10 @@ def _merge_coincident(
     merge = sizes > 1  # positions still allowed to merge
     used = np.zeros(n, bool)
     used[f.ravel()] = True
-    while True:
+    lowest = np.full(n_groups, n)
+    np.minimum.at(lowest, group, np.arange(n))
+    rep = lowest[group]
+    while safe:
         # tentative: a merging position is one vertex, any other vertex itself
         ids = np.where(merge[group], group, n_groups + np.arange(n))
         labels = _corner_fans(ids[f])
@@ -783,8 +793,6 @@ def _merge_coincident(
         # other, when no copy is used), where the position merges
         lowest_used = np.full(n_groups, n)
         np.minimum.at(lowest_used, group[used], rep[used])
-        lowest = np.full(n_groups, n)
-        np.minimum.at(lowest, group, np.arange(n))
         spare = ~used & merge[group]
         rep[spare] = np.where(lowest_used < n, lowest_used, lowest)[group[spare]]
         bad = _problem_vertices(rep[f], n)
