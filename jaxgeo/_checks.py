@@ -156,7 +156,7 @@ def check_point(name: str, p: Any, mesh) -> None:
         raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
     if not np.isfinite(a).all():
         raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")
-    _warn_if_coincident(name, a, mesh)
+    warn_if_coincident(name, a, mesh)
 
 
 class _Coincident:
@@ -194,27 +194,34 @@ def _coincident(mesh) -> _Coincident:
     return entry
 
 
-def _warn_if_coincident(name: str, point: np.ndarray, mesh) -> None:
-    """Warn when a 3-D endpoint sits where several vertices of the mesh share a
-    position (kept apart: a pinch, a crack, `merge_vertices=False`): the nearest
-    point of the mesh is then any of them, and the path silently starts from one.
-    One KD-tree query per call; the tree is built once per mesh."""
+def warn_if_coincident(name: str, points: np.ndarray, mesh) -> None:
+    """Warn when a 3-D endpoint (`(3,)`, or rows of `(N, 3)`) sits where several
+    vertices of the mesh share a position (kept apart: a pinch, a crack,
+    `merge_vertices=False`): the nearest point of the mesh is then any of them,
+    and the path silently starts from one. One KD-tree query per point; the tree
+    (over the shared vertices only) is built once per mesh."""
     c = _coincident(mesh)
     if c.tree is None:
         return
-    near = np.sort(c.tree.query_ball_point(point, c.radius))
-    if near.size < 2:
+    rows = np.atleast_2d(points)
+    hits = c.tree.query_ball_point(rows, c.radius)
+    ambiguous = [i for i, h in enumerate(hits) if len(h) > 1]
+    if not ambiguous:
         return
+    row = ambiguous[0]
+    near = np.sort(hits[row])
     hints = " or ".join(
         f"jaxgeo.SurfacePoint({int(c.face[i])}, "
         f"{[1.0 if k == c.corner[i] else 0.0 for k in range(3)]}) for vertex "
         f"{int(c.vertices[i])}"
         for i in near[:4]
     )
+    which = name if np.ndim(points) == 1 else f"{name}[{row}]"
+    more = f" ({len(ambiguous)} such rows of {name})" if np.ndim(points) > 1 else ""
     warnings.warn(
-        f"{name} = {point.tolist()} is at a position shared by vertices "
-        f"{', '.join(str(int(c.vertices[i])) for i in near)}, which the mesh keeps "
-        "apart: which of them the path starts from is arbitrary. Pass a "
+        f"{which} = {rows[row].tolist()} is at a position shared by vertices "
+        f"{', '.join(str(int(c.vertices[i])) for i in near)}{more}, which the mesh "
+        "keeps apart: which of them the path starts from is arbitrary. Pass a "
         f"jaxgeo.SurfacePoint on the intended side instead, e.g. {hints}",
         stacklevel=_caller_stacklevel(),
     )

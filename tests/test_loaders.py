@@ -15,7 +15,7 @@ import trimesh
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 import jaxgeo as jg
-from jaxgeo._checks import _COINCIDENT, check_point
+from jaxgeo._checks import _COINCIDENT, check_point, warn_if_coincident
 from jaxgeo._errors import JaxgeoError
 from jaxgeo.mesh import Mesh, load_mesh
 
@@ -429,6 +429,13 @@ def test_coincident_endpoint_warns(pinched):
     scale = float(pinched.mean_edge_length)
     with pytest.warns(UserWarning, match="shared by vertices 0, 4"):
         check_point("p2", np.full(3, 1e-8 * scale), pinched)
+
+
+def test_coincident_rows_of_a_batch_warn(pinched):
+    # for shortest_paths: one warning naming the first ambiguous row
+    points = np.array([[0.2, 0.2, 0], [0, 0, 0], [0.1, 0, 0.1], [0, 0, 0]])
+    with pytest.warns(UserWarning, match=r"P1\[1\] = .* vertices 0, 4 \(2 such rows"):
+        warn_if_coincident("P1", points, pinched)
 
 
 def test_other_endpoints_do_not_warn(pinched):
