@@ -8,6 +8,7 @@ from .mesh import Mesh as Mesh, load_mesh as load_mesh
 from .methods import Exact as Exact, Laser as Laser, Smooth as Smooth
 from .normals import vertex_normals as vertex_normals
 from .path import Path as Path, Status as Status
+from .repair import RepairReport as RepairReport, repair_mesh as repair_mesh
 from .trace import TraceOptions as TraceOptions
 
 __version__ = "0.1.0"

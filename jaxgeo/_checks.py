@@ -9,19 +9,28 @@ Everything here runs in Python/numpy before anything is traced, and raises
 from __future__ import annotations
 
 import numbers
+import warnings
+import weakref
 from collections.abc import Callable
 from typing import Any
 
 import jax
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ._errors import JaxgeoError
 from .locate import SurfacePoint
+from .mesh import _caller_stacklevel
 
 #: The vertex-normal weightings of `jaxgeo.normals.vertex_normals`.
 WEIGHTINGS = ("uniform", "area", "angle")
 #: The candidate-edge sets of `jaxgeo.trace`.
 CANDIDATES = ("local", "all")
+#: A 3-D endpoint within this many mean edge lengths of a position that several
+#: vertices share is taken to be at it: nearer, which of the copies' faces is the
+#: nearest is decided by rounding (text files keep 6-9 significant digits, float32
+#: 7), not by the caller.
+COINCIDENT_TOLERANCE = 1e-6
 
 
 def is_traced(x: Any) -> bool:
@@ -148,6 +157,75 @@ def check_point(name: str, p: Any, mesh) -> None:
         raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
     if not np.isfinite(a).all():
         raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")
+    warn_if_coincident(name, a, mesh)
+
+
+class _Coincident:
+    """The vertices of a mesh that share their position with another vertex: a
+    KD-tree over them, and one (face, corner) of each for the warning's hint."""
+
+    def __init__(self, mesh):
+        v = np.asarray(mesh.vertices)
+        _, group, counts = np.unique(v, axis=0, return_inverse=True, return_counts=True)
+        self.vertices = np.flatnonzero(counts[group.ravel()] > 1)
+        self.tree = cKDTree(v[self.vertices]) if self.vertices.size else None
+        if self.vertices.size:
+            faces = np.asarray(mesh.faces)
+            self.face = np.asarray(mesh.vertex_faces)[self.vertices, 0]
+            self.corner = np.argmax(faces[self.face] == self.vertices[:, None], 1)
+        self.radius = COINCIDENT_TOLERANCE * float(mesh.mean_edge_length)
+
+
+#: `_Coincident` per vertex array (by identity; dropped with the array).
+_COINCIDENT: dict[int, tuple[weakref.ref, _Coincident]] = {}
+
+
+def _coincident(mesh) -> _Coincident:
+    key = id(mesh.vertices)
+    hit = _COINCIDENT.get(key)
+    if hit is not None and hit[0]() is mesh.vertices:
+        return hit[1]
+
+    def drop(ref, key=key):
+        if _COINCIDENT.get(key, (None,))[0] is ref:
+            del _COINCIDENT[key]
+
+    entry = _Coincident(mesh)
+    _COINCIDENT[key] = (weakref.ref(mesh.vertices, drop), entry)
+    return entry
+
+
+def warn_if_coincident(name: str, points: np.ndarray, mesh) -> None:
+    """Warn when a 3-D endpoint (`(3,)`, or rows of `(N, 3)`) sits where several
+    vertices of the mesh share a position (kept apart: a pinch, a crack,
+    `merge_vertices=False`): the nearest point of the mesh is then any of them,
+    and the path silently starts from one. One KD-tree query per point; the tree
+    (over the shared vertices only) is built once per mesh."""
+    c = _coincident(mesh)
+    if c.tree is None:
+        return
+    rows = np.atleast_2d(points)
+    hits = c.tree.query_ball_point(rows, c.radius)
+    ambiguous = [i for i, h in enumerate(hits) if len(h) > 1]
+    if not ambiguous:
+        return
+    row = ambiguous[0]
+    near = np.sort(hits[row])
+    hints = " or ".join(
+        f"jaxgeo.SurfacePoint({int(c.face[i])}, "
+        f"{[1.0 if k == c.corner[i] else 0.0 for k in range(3)]}) for vertex "
+        f"{int(c.vertices[i])}"
+        for i in near[:4]
+    )
+    which = name if np.ndim(points) == 1 else f"{name}[{row}]"
+    more = f" ({len(ambiguous)} such rows of {name})" if np.ndim(points) > 1 else ""
+    warnings.warn(
+        f"{which} = {rows[row].tolist()} is at a position shared by vertices "
+        f"{', '.join(str(int(c.vertices[i])) for i in near)}{more}, which the mesh "
+        "keeps apart: which of them the path starts from is arbitrary. Pass a "
+        f"jaxgeo.SurfacePoint on the intended side instead, e.g. {hints}",
+        stacklevel=_caller_stacklevel(),
+    )
 
 
 def check_point_batch(name: str, p: Any) -> np.ndarray:

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import functools
+import importlib.util
+from pathlib import Path
 
 import numpy as np
+import pytest
 import trimesh
 
 import jaxgeo as jg
@@ -37,3 +40,20 @@ def great_circle(p: np.ndarray, q: np.ndarray) -> float:
     sphere (atan2 form: accurate near 0 and π)."""
     p, q = p / np.linalg.norm(p), q / np.linalg.norm(q)
     return float(np.arctan2(np.linalg.norm(np.cross(p, q)), p @ q))
+
+
+def package_mesh(relpath: str) -> Path:
+    """The path of a mesh file shipped inside an installed package, e.g.
+    `"pymeshlab/tests/sample_meshes/cow.obj"`, found without importing the package
+    (pymeshlab loads Qt and MeshLab's plugins on import). Skips the test when the
+    package is not installed (the `dev` extra installs pymeshlab and compas; their
+    wheels do not exist for every platform)."""
+    package, _, inner = relpath.partition("/")
+    spec = importlib.util.find_spec(package)
+    if spec is None or not spec.submodule_search_locations:
+        pytest.skip(f"{package} is not installed (it ships {inner})")
+    for root in spec.submodule_search_locations:
+        path = Path(root) / inner
+        if path.is_file():
+            return path
+    raise FileNotFoundError(f"{package} is installed but holds no {inner}")

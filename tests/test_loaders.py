@@ -14,8 +14,12 @@ import pytest
 import trimesh
 from hypothesis import HealthCheck, given, settings, strategies as st
 
+import jaxgeo as jg
+from jaxgeo._checks import _COINCIDENT, check_point, warn_if_coincident
 from jaxgeo._errors import JaxgeoError
 from jaxgeo.mesh import Mesh, load_mesh
+
+from .helpers import package_mesh
 
 FORMATS = {
     # name: (extension, trimesh export arguments)
@@ -174,13 +178,16 @@ BAD_FILES = {
     "range.ply": (PLY_HEADER + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 70000\n", "out of range"),
     "lines.obj": (b"v 0 0 0\nv 1 0 0\nl 1 2\n", "holds no triangles"),
     "no_faces.off": (b"OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "holds no triangles"),
-    "huge_count.off": (b"OFF\n1000000000 1 0\n0 0 0\n3 0 1 2\n", "could not read"),
+    "huge_count.off": (
+        b"OFF\n1000000000 1 0\n0 0 0\n3 0 1 2\n",
+        "header promises 1000000000 vertices, but the file holds 2 lines",
+    ),
     "huge_count.ply": (
         PLY_HEADER.replace(b"ascii", b"binary_little_endian").replace(
             b"vertex 3", b"vertex 4000000000"
         )
         + b"\0" * 40,
-        "could not read .* as PLY",
+        "header promises 4000000000 vertex, 1 face, but the file holds 40 bytes",
     ),
     "not_ply.ply": (b"hello\n", "could not read .* as PLY"),
     "short.stl": (b"\0" * 50, "neither an ASCII STL .* nor a binary STL"),
@@ -232,6 +239,226 @@ def test_no_trimesh_log_noise(tmp_path, caplog):
     with pytest.raises(JaxgeoError):
         load_mesh(write(tmp_path, "bad.ply", b"ply\nformat ascii 1.0\nend_header\n1 2"))
     assert not [r for r in caplog.records if r.name.startswith("trimesh")]
+
+
+# ------------------------------------------------------------------ lying files
+
+OBJ_TRIANGLES = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n"
+
+LYING_FILES = {
+    # name: (contents, pattern the JaxgeoError message must match)
+    "index0.obj": (
+        OBJ_TRIANGLES + b"f 0 1 2\n",
+        r"face with vertex index 0 on line 7 \('f 0 1 2'; 1 such",
+    ),
+    "index0_slashes.obj": (
+        OBJ_TRIANGLES.replace(b"f 2 4 3", b"f 2/1/1 4/1/1 0/1/1"),
+        "vertex index 0 on line 6.*OBJ indices start at 1",
+    ),
+    "short_vertices.off": (
+        b"OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "promises 4 vertices, 1 faces, but the file holds 4 lines",
+    ),
+    "short_faces.off": (
+        b"OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "promises 3 vertices, 2 faces, but the file holds 4 lines",
+    ),
+    "short_vertices.ply": (
+        PLY_HEADER.replace(b"vertex 3", b"vertex 4")
+        + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "promises 4 vertex, 1 face, but the file holds 4 lines",
+    ),
+    "short_faces.ply": (
+        PLY_HEADER.replace(b"face 1", b"face 2") + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "promises 3 vertex, 2 face, but the file holds 4 lines",
+    ),
+    "short_vertices_binary.ply": (
+        PLY_HEADER.replace(b"ascii", b"binary_little_endian").replace(
+            b"vertex 3", b"vertex 4"
+        )
+        + np.zeros(9, "<f4").tobytes()
+        + struct.pack("<B3i", 3, 0, 1, 2),
+        "promises 4 vertex, 1 face, but the file holds 49 bytes",
+    ),
+    "count_beyond_file.stl": (
+        b"\0" * 80 + struct.pack("<I", 5) + 3 * STL_TRIANGLE,
+        r"header says 5 triangles \(334 bytes\) but the file has 234 bytes "
+        r"\(3 whole triangles\)",
+    ),
+}
+
+
+@pytest.mark.parametrize("name", list(LYING_FILES))
+def test_lying_file_refused(tmp_path, name):
+    data, pattern = LYING_FILES[name]
+    with pytest.raises(JaxgeoError, match=pattern) as info:
+        load_mesh(write(tmp_path, name, data))
+    assert name in str(info.value)
+
+
+def test_lying_file_fixtures_are_honest_when_fixed(tmp_path):
+    """The same files with the lie removed load: the refusals above are about
+    the lie, not about something else in the fixture."""
+    honest = {
+        "a.obj": OBJ_TRIANGLES,
+        "b.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "c.ply": PLY_HEADER + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "d.ply": PLY_HEADER.replace(b"ascii", b"binary_little_endian")
+        + np.array([0, 0, 0, 1, 0, 0, 0, 1, 0], "<f4").tobytes()
+        + struct.pack("<B3i", 3, 0, 1, 2),
+        "e.stl": b"\0" * 80 + struct.pack("<I", 1) + STL_TRIANGLE,
+    }
+    for name, data in honest.items():
+        assert load_mesh(write(tmp_path, name, data)).n_faces >= 1, name
+
+
+def test_obj_separated_by_tabs(tmp_path):
+    data = OBJ_TRIANGLES.replace(b" ", b"\t").replace(b"\nf", b"\n  f")
+    mesh = load_mesh(write(tmp_path, "tabs.obj", data))
+    expected = load_mesh(write(tmp_path, "spaces.obj", OBJ_TRIANGLES))
+    assert np.array_equal(np.asarray(mesh.faces), np.asarray(expected.faces))
+    assert np.array_equal(np.asarray(mesh.vertices), np.asarray(expected.vertices))
+
+
+# ------------------------------------------------------ merging never invalidates
+
+
+def two_tetrahedra(shared: str) -> trimesh.Trimesh:
+    """Two closed tetrahedra touching at a vertex, along an edge or on a face (the
+    second is the first turned or mirrored), each with its own copies of the
+    shared vertices: valid as it is, a pinch, an edge of four faces or a doubled
+    face once identical vertices are merged."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    w = {"vertex": -v, "edge": v * [1, -1, -1], "face": v * [1, 1, -1]}[shared]
+    g = f if shared == "edge" else f[:, ::-1]  # a mirror image turns inside out
+    return trimesh.Trimesh(
+        np.concatenate([v, w]), np.concatenate([f, g + 4]), process=False
+    )
+
+
+@pytest.mark.parametrize("shared", ["vertex", "edge", "face"])
+@pytest.mark.parametrize("fmt", ["obj", "stl_binary"])
+def test_merge_keeps_touching_solids_apart(tmp_path, shared, fmt):
+    tm = two_tetrahedra(shared)
+    path = write(tmp_path, f"touch.{FORMATS[fmt][0]}", export(tm, fmt))
+    kept = {"vertex": 1, "edge": 2, "face": 3}[shared]  # positions held by two
+    with pytest.warns(UserWarning, match=f"{kept} positions hold several vertices"):
+        mesh = load_mesh(path)
+    assert mesh.n_faces == 8
+    if shared == "face" and fmt == "stl_binary":
+        # an STL does not tell which of the four faces at each edge of the shared
+        # face belong together: kept apart there, valid, but not closed
+        assert 8 < mesh.n_vertices <= 24
+    else:  # two closed tetrahedra: what the file holds
+        assert mesh.n_vertices == 8
+        assert not (np.asarray(mesh.edge_faces)[:, 1] < 0).any()
+        assert np.unique(np.asarray(mesh.face_component)).size == 2
+
+
+@pytest.mark.parametrize("shared", ["vertex", "edge", "face"])
+def test_merge_and_repair_touching_solids(tmp_path, shared):
+    """With repair, every position merges and repair separates per fan; solids
+    that share a face become one (the doubled face, a wall, goes)."""
+    path = write(tmp_path, "touch.stl", export(two_tetrahedra(shared), "stl_binary"))
+    warn = "2 duplicate faces" if shared == "face" else "non-manifold vertices split"
+    with pytest.warns(UserWarning, match=warn):
+        mesh = load_mesh(path, repair=True)
+    assert not (np.asarray(mesh.edge_faces)[:, 1] < 0).any()
+    parts = np.unique(np.asarray(mesh.face_component)).size
+    assert (mesh.n_vertices, mesh.n_faces, parts) == {
+        "vertex": (8, 8, 2),
+        "edge": (8, 8, 2),
+        "face": (5, 6, 1),
+    }[shared]
+
+
+def test_merge_real_pinch():
+    """cow.obj: a closed mesh with one vertex duplicated where two parts touch.
+    Merged naively it was refused (non-manifold vertex); now it loads as the file
+    means it, with a warning naming the two vertices."""
+    path = package_mesh("pymeshlab/tests/sample_meshes/cow.obj")
+    with pytest.warns(UserWarning, match=r"1 positions .* vertices \(44, 2903\)"):
+        mesh = load_mesh(path)
+    apart = load_mesh(path, merge_vertices=False)
+    assert np.array_equal(np.asarray(mesh.faces), np.asarray(apart.faces))
+    assert not (np.asarray(mesh.edge_faces)[:, 1] < 0).any()
+
+
+def test_merge_real_touching_cubes():
+    """compas's cube_ascii.stl: 668 cubes, some sharing edges. Merged naively it
+    was refused (656 non-manifold edges); merged per fan, it is 668 closed cubes."""
+    path = package_mesh("compas/data/samples/cube_ascii.stl")
+    with pytest.warns(UserWarning, match="1324 positions hold several vertices"):
+        mesh = load_mesh(path)
+    assert mesh.n_faces == 8016
+    assert np.unique(np.asarray(mesh.face_component)).size == 668
+    assert not (np.asarray(mesh.edge_faces)[:, 1] < 0).any()
+
+
+def test_textured_obj():
+    """A textured OBJ: trimesh keeps its vertices apart at the texture seams, so
+    as `trimesh.load` gives it the mesh has bow-ties; `load_mesh` merges them."""
+    path = package_mesh("pymeshlab/tests/sample_meshes/bunny10k_textured.obj")
+    mesh = load_mesh(path)
+    assert (mesh.n_vertices, mesh.n_faces) == (5051, 9999)
+    tm = trimesh.load(path)
+    with pytest.raises(JaxgeoError, match="merge_vertices=True.*load_mesh"):
+        Mesh.from_trimesh(tm)
+    merged = Mesh.from_trimesh(tm, merge_vertices=True)
+    assert (merged.n_vertices, merged.n_faces) == (5051, 9999)
+
+
+# ------------------------------------------------------- coincident endpoints
+
+
+@pytest.fixture(scope="module")
+def pinched():
+    """Two tetrahedra touching at the origin, kept apart (vertices 0 and 4)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return Mesh.from_trimesh(two_tetrahedra("vertex"))
+
+
+def test_coincident_endpoint_warns(pinched):
+    with pytest.warns(UserWarning, match=r"p1 = .* shared by vertices 0, 4") as info:
+        check_point("p1", np.zeros(3), pinched)
+    message = str(info[0].message)
+    assert "jaxgeo.SurfacePoint" in message and "for vertex 4" in message
+    # within rounding of the position, still ambiguous
+    scale = float(pinched.mean_edge_length)
+    with pytest.warns(UserWarning, match="shared by vertices 0, 4"):
+        check_point("p2", np.full(3, 1e-8 * scale), pinched)
+
+
+def test_coincident_rows_of_a_batch_warn(pinched):
+    # for shortest_paths: one warning naming the first ambiguous row
+    points = np.array([[0.2, 0.2, 0], [0, 0, 0], [0.1, 0, 0.1], [0, 0, 0]])
+    with pytest.warns(UserWarning, match=r"P1\[1\] = .* vertices 0, 4 \(2 such rows"):
+        warn_if_coincident("P1", points, pinched)
+
+
+def test_other_endpoints_do_not_warn(pinched):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_point("p1", np.array([1.0, 0, 0]), pinched)  # an ordinary vertex
+        check_point("p1", np.array([0.2, 0.2, 0]), pinched)  # inside a face
+        check_point("p1", np.full(3, 1e-4), pinched)  # near, not at, the pinch
+        check_point("p1", jg.SurfacePoint(0, [1.0, 0, 0]), pinched)
+
+
+def test_coincident_lookup_is_cached(pinched):
+    check_point("p1", np.array([0.2, 0.2, 0]), pinched)
+    entry = _COINCIDENT[id(pinched.vertices)]
+    check_point("p1", np.array([0.3, 0.2, 0]), pinched)
+    assert _COINCIDENT[id(pinched.vertices)] is entry
+
+
+def test_shortest_path_warns_at_coincident_endpoint(pinched):
+    # p2 is refused before anything compiles, after p1 was checked
+    with pytest.warns(UserWarning, match="p1 = .* shared by vertices 0, 4"):
+        with pytest.raises(JaxgeoError, match="p2 has NaN"):
+            jg.shortest_path(pinched, np.zeros(3), [np.nan, 0, 0])
 
 
 # ------------------------------------------------------------------------ fuzzing
