@@ -137,7 +137,7 @@ class _State(NamedTuple):
     steps: Int[Array, ""]  # loop iterations so far (bounded by the step budget)
     anchor: Int[Array, ""]  # slot of the last wrapped vertex (or the start)
     aim: Int[Array, ""]  # the vertex the chord aims at, −1 for point 2
-    slid_from: Int[Array, ""]  # the vertex a slide along a rim came from, or −1
+    slide_dir: Int[Array, ""]  # a slide's way round its boundary loop: ±1, 0 none
     slide_origin: Int[Array, ""]  # where that slide began (a full turn stops it)
     no_taut: Int[Array, ""]  # a slide target whose taut aim was blocked, or −1
     pts: Float[Array, "M 3"]
@@ -217,6 +217,14 @@ def _lane(
     # on it: far above the rounding of unit vectors and of a fan's angle sum.
     slack = 1e3 * eps_of(dtype)
     fan_width = mesh.vertex_faces.shape[1]
+    boundary_edge = mesh.edge_faces[:, 1] < 0
+    is_boundary_vertex = (
+        jnp.zeros(mesh.n_vertices, bool)
+        .at[edges[:, 0]]
+        .max(boundary_edge)
+        .at[edges[:, 1]]
+        .max(boundary_edge)
+    )
 
     if options.candidates == "all":
         all_edges = jnp.arange(mesh.n_edges, dtype=edges.dtype)
@@ -246,15 +254,15 @@ def _lane(
         behind = touches(cand, prev_kind, prev_idx)
         return cand, live & ~touches(cand, kind, idx) & ~behind
 
-    def boundary_slide(pos, aim_pos, kind, idx, star, slid_from, prev_vertex):
+    def boundary_slide(pos, aim_pos, kind, idx, star, slide_dir, prev_vertex):
         """The boundary vertex to slide to when no crossing lies ahead: among the
         ends of the boundary edges through the current point (its vertex's two; its
-        edge; a start face's), not the vertex a slide came from nor the previous
-        point. A slide that continues along a rim (`slid_from` ≥ 0) takes the rim's
-        next vertex whatever its direction (a rim round a hole turns away from
-        point 2); a new slide takes the end whose direction is closest to the
-        chord's, if it is not behind (cosine ≥ −slack). Returns
-        `(possible, vertex, edge)`."""
+        edge; a start face's), not the previous point. A slide that continues
+        (`slide_dir` ≠ 0) keeps its way round the boundary loop (+1 along the
+        faces' orientation, −1 against it) whatever the direction in space (a rim
+        round a hole turns away from point 2); a new slide takes the end whose
+        direction is closest to the chord's, if it is not behind (cosine ≥
+        −slack). Returns `(possible, vertex, edge, way)`."""
         se = mesh.face_edges[jnp.maximum(star, 0)].reshape(-1)
         ends = edges[se]  # (3S, 2)
         through = jnp.where(
@@ -263,14 +271,25 @@ def _lane(
             jnp.where(kind == EDGE, se == idx, True),
         )
         usable = jnp.repeat(star >= 0, 3) & (mesh.edge_faces[se, 1] < 0) & through
+        # The head of each boundary edge in its face's orientation.
+        corners = faces[mesh.edge_faces[se, 0]]  # (3S, 3)
+        ia = jnp.argmax(corners == ends[:, :1], axis=1)
+        ib = jnp.argmax(corners == ends[:, 1:], axis=1)
+        head = jnp.where((ib - ia) % 3 == 1, ends[:, 1], ends[:, 0])
         w = ends.reshape(-1)
-        usable = jnp.repeat(usable, 2) & (w != slid_from) & (w != prev_vertex)
+        way = jnp.where(w == jnp.repeat(head, 2), 1, -1)
+        usable = jnp.repeat(usable, 2) & (w != prev_vertex)
         usable = usable & ~((kind == VERTEX) & (w == idx))
         step_dir = safe_normalize(verts[w] - pos)
         cosine = step_dir @ safe_normalize(aim_pos - pos)
-        usable = usable & ((slid_from >= 0) | (cosine > -slack))
+        usable = usable & jnp.where(slide_dir != 0, way == slide_dir, cosine > -slack)
         best = jnp.argmax(jnp.where(usable, cosine, -jnp.inf))
-        return jnp.any(usable), w[best].astype(jnp.int32), se[best // 2]
+        return (
+            jnp.any(usable),
+            w[best].astype(jnp.int32),
+            se[best // 2],
+            way[best].astype(jnp.int32),
+        )
 
     def contains(face, kind, idx):
         """Whether the point (kind, idx) lies on the closure of `face`."""
@@ -362,8 +381,8 @@ def _lane(
 
         # No crossing ahead on the boundary: slide along a boundary edge instead.
         prev_vertex = jnp.where(s.prev_kind == VERTEX, s.prev_idx, -1)
-        can_slide, slide_to, slide_edge = boundary_slide(
-            s.pos, aim_pos, s.kind, s.idx, star, s.slid_from, prev_vertex
+        can_slide, slide_to, slide_edge, slide_way = boundary_slide(
+            s.pos, aim_pos, s.kind, s.idx, star, s.slide_dir, prev_vertex
         )
         stuck = ~reached & ~crossed
         slide = stuck & ~aiming & can_slide
@@ -373,7 +392,7 @@ def _lane(
         here_vertex = jnp.where(
             s.kind == VERTEX, s.idx, jnp.where(s.kind == EDGE, other_end, -1)
         )
-        origin = jnp.where(s.slid_from >= 0, s.slide_origin, here_vertex)
+        origin = jnp.where(s.slide_dir != 0, s.slide_origin, here_vertex)
         round_the_rim = slide & (slide_to == origin)
         slide = slide & ~round_the_rim
         # Wrap or shortcut (the path must bend only at vertices it wraps): if the
@@ -390,8 +409,9 @@ def _lane(
         wraps = (s.kind == VERTEX) & (bend >= jnp.pi - slack)
         taut = slide & ~at_anchor & ~wraps & (slide_to != s.no_taut)
         direct = slide & ~taut
-        # Aiming at a vertex and blocked (another obstacle in between): give the aim
-        # up, make the current point the anchor and aim at point 2 again; the next
+        # Aiming at a vertex and blocked (the rim in between): give the aim up, make
+        # the current point the anchor and aim at point 2 again (the slide keeps its
+        # way round the rim); the next
         # slide to that vertex goes straight along the rim (no second taut aim).
         give_up = stuck & aiming
 
@@ -442,8 +462,16 @@ def _lane(
             return jnp.where(moving, new_moving, jnp.where(back, new_back, old))
 
         sliding = direct | taut
-        new_slid_from = jnp.where(sliding, here_vertex, s.slid_from)
-        new_slid_from = jnp.where((crossed & ~aiming) | give_up, -1, new_slid_from)
+        # A slide ends where the laser ray goes on into the mesh: a crossing toward
+        # point 2 on an interior edge or vertex (one on the boundary, across a
+        # notch of the rim, continues the slide).
+        on_boundary = jnp.where(
+            cross_kind == EDGE,
+            boundary_edge[cross_idx],
+            is_boundary_vertex[cross_idx],
+        )
+        new_dir = jnp.where(sliding, slide_way, s.slide_dir)
+        new_dir = jnp.where(crossed & ~aiming & ~on_boundary, 0, new_dir)
         new_origin = jnp.where(sliding, origin, s.slide_origin)
         upd = running & (moving | back | give_up)
         new_anchor = jnp.where(
@@ -461,7 +489,7 @@ def _lane(
             steps=s.steps + running.astype(jnp.int32),
             anchor=jnp.where(upd, new_anchor, s.anchor).astype(jnp.int32),
             aim=jnp.where(upd, new_aim, s.aim).astype(jnp.int32),
-            slid_from=jnp.where(upd, new_slid_from, s.slid_from).astype(jnp.int32),
+            slide_dir=jnp.where(upd, new_dir, s.slide_dir).astype(jnp.int32),
             slide_origin=jnp.where(upd, new_origin, s.slide_origin).astype(jnp.int32),
             no_taut=jnp.where(running & give_up, s.aim, s.no_taut).astype(jnp.int32),
             pts=keep(s.pts, out_point),
@@ -484,7 +512,7 @@ def _lane(
         steps=jnp.asarray(0, jnp.int32),
         anchor=jnp.asarray(0, jnp.int32),
         aim=minus1,
-        slid_from=minus1,
+        slide_dir=jnp.asarray(0, jnp.int32),
         slide_origin=minus1,
         no_taut=minus1,
         pts=jnp.zeros((m, 3), dtype).at[0].set(p1),
