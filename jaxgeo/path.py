@@ -35,10 +35,12 @@ class Status(enum.IntEnum):
 
 _MESSAGES = {
     Status.SUCCESS: "point 2 reached",
-    Status.MAX_STEPS: "out of steps: the path needs more than max_points points "
-    "(raise max_points)",
-    Status.NO_CROSSING: "no crossing found ahead of the current point, and no "
-    "boundary edge to slide along",
+    Status.MAX_STEPS: "out of steps: the path needs more than max_points points, "
+    "or the laser ray's step budget (8 per point) ran out (raise max_points)",
+    Status.NO_CROSSING: "the laser ray found no crossing ahead of the current "
+    "point on its faces (the chord's projection leaves the surface there: a "
+    "concave region, a gap, or a boundary it cannot slide along without turning "
+    "back); method='exact' does not depend on it",
     Status.FAR_FROM_SURFACE: "an endpoint is too far from the surface",
     Status.DIFFERENT_COMPONENTS: "the endpoints lie on different connected "
     "components of the mesh",

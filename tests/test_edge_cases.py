@@ -419,7 +419,7 @@ def test_no_crossing_is_a_status_and_raises():
     mesh = sector(1.5 * np.pi)
     v = V(mesh)
     a, b = v[vid(0, 0)], v[vid(0, N)]
-    with pytest.raises(jg.JaxgeoError, match="no crossing found"):
+    with pytest.raises(jg.JaxgeoError, match="no crossing ahead"):
         jg.shortest_path(mesh, a, b)
     path = jg.shortest_path(mesh, a, b, throw=False)
     assert int(path.status) == jg.Status.NO_CROSSING
