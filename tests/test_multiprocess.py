@@ -121,14 +121,16 @@ def test_two_processes_equal_one_bit_for_bit(tmp_path):
 @pytest.mark.slow
 def test_two_processes_stream_a_batch_too_large_for_one_chunk(tmp_path):
     """2048 pairs at the default `max_points` (1024), streamed in chunks of 32
-    under an address-space cap of 2.5 outputs; as one chunk on one device the
-    same batch does not fit under the same cap."""
+    under an address-space cap (RLIMIT_AS) of 3 outputs above the compiled state;
+    as one chunk on one device the same batch does not fit under the same cap."""
     cluster = _launch(tmp_path, "large", PROCESSES, DEVICES_PER_PROCESS)
     (tmp_path / "ref").mkdir()
     [(_, ref)] = _launch(tmp_path / "ref", "large", 1, PROCESSES * DEVICES_PER_PROCESS)
     (tmp_path / "one").mkdir()
     [(one, _)] = _launch(tmp_path / "one", "one-shot", 1, 1)
-    assert one["error"] is not None and "RESOURCE_EXHAUSTED" in one["error"]
+    # out of memory in XLA (RESOURCE_EXHAUSTED) or in numpy (MemoryError)
+    assert one["error"] is not None
+    assert "RESOURCE_EXHAUSTED" in one["error"] or "MemoryError" in one["error"]
     for info, arrays in cluster:
         assert info["error"] is None
         _assert_identical(arrays, ref)
