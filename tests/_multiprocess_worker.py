@@ -10,7 +10,8 @@ from XLA_FLAGS (--xla_force_host_platform_device_count). ROLE is
   and (in a cluster) a batch that differs on one process;
 - "large": a batch streamed in chunks under an address-space cap (`RLIMIT_AS`) of
   3 times its output above what the process holds after compiling;
-- "one-shot": the same batch as one chunk under the same cap (expected to fail).
+- "one-shot": the same batch as one chunk under the same cap (by hand, for the
+  figures in docs/scaling.md).
 
 All calls use the default method. Results go to OUT_DIR/ROLE-PROCESS_ID.npz and
 .json (statuses of the calls, peak memory).
@@ -31,9 +32,9 @@ SMALL_N, SMALL_CHUNK, SMALL_POINTS = 10, 4, 128
 #: The large batch: streamed in chunks of LARGE_CHUNK at the default capacity.
 LARGE_N, LARGE_CHUNK, LARGE_POINTS = 2048, 32, 1024
 #: The large batch's address-space allowance, in multiples of its output's bytes:
-#: streaming measured 2.2-2.5 (the gathered chunks, their concatenation, thread
-#: stacks); one chunk of LARGE_N needs its XLA outputs and loop temporaries (2.5
-#: for the laser method, measured by XLA) and then the concatenated copy (1).
+#: streaming measured 1.5-2.4 (the gathered chunks, their concatenation, thread
+#: stacks); one chunk of LARGE_N measured 2.8 (its XLA outputs and temporaries,
+#: 2.4 for the laser method by XLA's count, then the concatenated copy).
 CAP_OUTPUTS = 3.0
 
 

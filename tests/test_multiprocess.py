@@ -119,28 +119,26 @@ def test_two_processes_equal_one_bit_for_bit(tmp_path):
 
 
 @pytest.mark.slow
-def test_two_processes_stream_a_batch_too_large_for_one_chunk(tmp_path):
+def test_two_processes_stream_a_large_batch_under_a_memory_cap(tmp_path):
     """2048 pairs at the default `max_points` (1024), streamed in chunks of 32
-    under an address-space cap (RLIMIT_AS) of 3 outputs above the compiled state;
-    as one chunk on one device the same batch does not fit under the same cap."""
+    under an address-space cap (RLIMIT_AS) of 3 outputs above the compiled state.
+    Streaming measured 1.5-2.4 outputs; the same batch as one chunk on one device
+    measured 2.8 (and ran out of memory under 2.5), too close to the streamed
+    figure on a CPU, where the result itself lives in device memory, to be a
+    robust check: see docs/scaling.md."""
     cluster = _launch(tmp_path, "large", PROCESSES, DEVICES_PER_PROCESS)
     (tmp_path / "ref").mkdir()
     [(_, ref)] = _launch(tmp_path / "ref", "large", 1, PROCESSES * DEVICES_PER_PROCESS)
-    (tmp_path / "one").mkdir()
-    [(one, _)] = _launch(tmp_path / "one", "one-shot", 1, 1)
-    # out of memory in XLA (RESOURCE_EXHAUSTED) or in numpy (MemoryError)
-    assert one["error"] is not None
-    assert "RESOURCE_EXHAUSTED" in one["error"] or "MemoryError" in one["error"]
     for info, arrays in cluster:
         assert info["error"] is None
         _assert_identical(arrays, ref)
         assert info["after"]["VmPeak"] <= info["cap"]
-        peak = info["after"]["ru_maxrss"] - info["before"]["ru_maxrss"]
+        start = info["before"]["VmSize"]
         print(
             f"process {info['process_index']}: output "
             f"{info['output_bytes'] / 2**20:.0f} MiB, peak RSS "
             f"{info['before']['ru_maxrss'] / 2**20:.0f} -> "
-            f"{info['after']['ru_maxrss'] / 2**20:.0f} MiB (+{peak / 2**20:.0f}), "
-            f"VmPeak {info['after']['VmPeak'] / 2**20:.0f} MiB "
-            f"(cap {info['cap'] / 2**20:.0f})"
+            f"{info['after']['ru_maxrss'] / 2**20:.0f} MiB, peak address space "
+            f"+{(info['after']['VmPeak'] - start) / 2**20:.0f} MiB "
+            f"(cap +{(info['cap'] - start) / 2**20:.0f})"
         )
