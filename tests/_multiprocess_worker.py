@@ -32,7 +32,7 @@ SMALL_N, SMALL_CHUNK, SMALL_POINTS = 10, 4, 128
 #: The large batch: streamed in chunks of LARGE_CHUNK at the default capacity.
 LARGE_N, LARGE_CHUNK, LARGE_POINTS = 2048, 32, 1024
 #: The large batch's address-space allowance, in multiples of its output's bytes:
-#: streaming measured 1.5-2.4 (the gathered chunks, their concatenation, thread
+#: streaming measured 1.5-2.5 (the gathered chunks, their concatenation, thread
 #: stacks); one chunk of LARGE_N measured 2.8 (its XLA outputs and temporaries,
 #: 2.4 for the laser method by XLA's count, then the concatenated copy).
 CAP_OUTPUTS = 3.0
