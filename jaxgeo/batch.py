@@ -10,6 +10,7 @@ size is rounded up to a multiple of the device count.
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Callable
 from typing import Literal
 
@@ -55,6 +56,23 @@ def _gather(x) -> np.ndarray:
 
         return np.asarray(multihost_utils.process_allgather(x, tiled=True))
     return np.asarray(x)
+
+
+def _check_same_on_all_processes(mesh: Mesh, a: np.ndarray, b: np.ndarray) -> None:
+    """Raise on every process if the processes were given different meshes or
+    pairs: each solves only its own shards of its own copy, so a mismatch would
+    give a silently mixed result. One small all-gather of checksums."""
+    from jax.experimental import multihost_utils
+
+    parts = (a, b, np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    sums = np.array([zlib.crc32(np.ascontiguousarray(x)) for x in parts], np.uint32)
+    every = np.asarray(multihost_utils.process_allgather(sums))  # (processes, 4)
+    differ = np.flatnonzero(np.any(every != every[0], axis=1))
+    if differ.size:
+        raise JaxgeoError(
+            "shortest_paths across processes needs the same mesh, p1 and p2 on "
+            f"every process; process(es) {differ.tolist()} differ from process 0"
+        )
 
 
 def _device_sharding() -> NamedSharding | None:
@@ -117,6 +135,8 @@ def shortest_paths(
     n = a.shape[0]
     if n == 0:
         raise JaxgeoError("empty batch: p1 and p2 have no rows")
+    if jax.process_count() > 1:
+        _check_same_on_all_processes(mesh, a, b)
     sharding = _device_sharding() if shard else None
     if sharding is not None:
         n_dev = sharding.mesh.size
