@@ -100,32 +100,65 @@ def test_allowances_offset_the_cut_line(cone_pattern):
     assert len(per_cloth) == 16
 
 
-def test_cli_pattern_writes_a_dxf_that_fits(tmp_path):
-    v, f = surfaces.cone_tent(48, 12)
+def _tent_file(tmp_path):
     import trimesh
 
+    v, f = surfaces.cone_tent(48, 12)
     trimesh.Trimesh(v, f, process=False).export(tmp_path / "tent.obj")
-    roll = 0.4
+    return str(tmp_path / "tent.obj")
+
+
+def test_cli_pattern_writes_a_dxf_and_report_that_fit(tmp_path, capsys):
+    import json
+
+    roll = 0.45
     code = pattern_main(
-        [
-            "pattern",
-            str(tmp_path / "tent.obj"),
-            "--seams",
-            "16",
-            "--roll-width",
-            str(roll),
-            "--out",
-            str(tmp_path / "out"),
-            "--steps",
-            "3",
-            "--rounds",
-            "1",
-        ]
-    )
-    assert code == 0
+        ["pattern", _tent_file(tmp_path), "--seams", "16", "--roll-width", str(roll),
+         "--out", str(tmp_path / "out"), "--steps", "1", "--rounds", "1",
+         "--compensation", "0.5,1.0", "--prestress", "2,1.5",
+         "--material", "600,400,0.3,30", "--allowance", "0.01,0.02",
+         "--report", str(tmp_path / "r.json")]
+    )  # fmt: skip
+    assert code == 0, capsys.readouterr().err
     doc = ezdxf.readfile(tmp_path / "out" / "pattern.dxf")
     cuts = [e for e in doc.modelspace().query('LWPOLYLINE[layer=="CUT"]')]
     assert len(cuts) == 16 and all(e.closed for e in cuts)
     for e in cuts:
         pts = np.array([p[:2] for p in e.get_points()])
         assert strip_width(pts)[0] <= roll + 1e-9
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert len(report["cloths"]) == 16
+    for c in report["cloths"]:
+        assert {"width", "area", "weld_length_mismatch", "stress_deviation"} <= set(c)
+        assert c["width"] <= roll and set(c["stress_deviation"]) >= {"max", "rms"}
+    total = report["stress_deviation"]
+    assert 0 < total["rms"] <= total["max"]
+    assert (tmp_path / "out" / "stress_deviation.png").stat().st_size > 0
+
+
+def test_cli_pattern_that_does_not_fit_says_so(tmp_path, capsys):
+    code = pattern_main(
+        ["pattern", _tent_file(tmp_path), "--seams", "8", "--roll-width", "0.3",
+         "--out", str(tmp_path / "out"), "--steps", "1", "--rounds", "1"]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 3
+    assert "does not fit the roll" in err and "--seams" in err and "0.3 m" in err
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--compensation", "1,2,3"], ["--material", "600,x,0.3,30"],
+     ["--objective", "beauty"], ["--method", "fast"]],
+)  # fmt: skip
+def test_cli_pattern_usage_errors_exit_2(tmp_path, extra):
+    with pytest.raises(SystemExit) as e:
+        pattern_main(["pattern", "m.obj", "--seams", "4", "--roll-width", "1",
+                      "--out", str(tmp_path), *extra])  # fmt: skip
+    assert e.value.code == 2
+
+
+def test_cli_pattern_bad_material_exits_2(tmp_path):
+    code = pattern_main(["pattern", "m.obj", "--seams", "4", "--roll-width", "1",
+                         "--out", str(tmp_path), "--material", "600,400,2,30"])  # fmt: skip
+    assert code == 2

@@ -6,8 +6,9 @@ warp arrow, label position, weld-length matching, and nesting on a sheet.
   design boundary (an edge-cable line).
 - The **cut line** adds the weld allowance outside every weld run and the
   boundary allowance outside every boundary run: the union of the net polygon
-  with each run buffered by its allowance (shapely, mitred joins, square caps so
-  that neighbouring runs close the corner).
+  with each run buffered by its allowance (shapely, mitred joins, flat caps)
+  and, at each corner between runs, the mitre of their two offset lines
+  (limited to 4 allowances).
 - **Weld matching**: the two sides of a seam belong to two cloths; their cut
   (compensated) lengths differ when the cloths are flattened or compensated
   differently. Each side carries match marks at the same fractions of its
@@ -125,17 +126,47 @@ def _marks(run: Run, spacing: float, size: float) -> np.ndarray:
     return np.stack([pts, pts + size * n], axis=1)
 
 
+def _corner(p, ta, tb, da, db) -> Polygon | None:
+    """The mitred corner between the offsets of two runs meeting at `p` (end
+    direction `ta` of the first, start direction `tb` of the second)."""
+    na, nb = np.array([ta[1], -ta[0]]), np.array([tb[1], -tb[0]])
+    a, b = p + da * na, p + db * nb
+    m = np.column_stack([ta, -tb])
+    if abs(np.linalg.det(m)) < 1e-9:
+        return None
+    s = np.linalg.solve(m, b - a)
+    mitre = a + s[0] * ta
+    limit = 4.0 * max(da, db)
+    if np.linalg.norm(mitre - p) > limit:
+        mitre = p + limit * (mitre - p) / np.linalg.norm(mitre - p)
+    poly = Polygon([p, a, mitre, b])
+    return poly if poly.is_valid and poly.area > 0 else poly.buffer(0)
+
+
 def _outline_with_allowances(net, runs, weld, boundary) -> np.ndarray:
     poly = Polygon(net)
     if not poly.is_valid:
         poly = shapely.make_valid(poly)
     parts = [poly]
+
+    def dist(r):
+        return weld if r.seam != BOUNDARY else boundary
+
+    def unit(v):
+        return v / max(np.linalg.norm(v), 1e-300)
+
     for r in runs:
-        d = weld if r.seam != BOUNDARY else boundary
-        if d > 0:
-            parts.append(
-                LineString(r.points).buffer(d, cap_style="square", join_style="mitre")
-            )
+        if dist(r) > 0:
+            line = LineString(r.points)
+            parts.append(line.buffer(dist(r), cap_style="flat", join_style="mitre"))
+    for ra, rb in zip(runs, runs[1:] + runs[:1]):
+        da, db = dist(ra), dist(rb)
+        if max(da, db) > 0 and len(runs) > 1:
+            ta = unit(ra.points[-1] - ra.points[-2])
+            tb = unit(rb.points[1] - rb.points[0])
+            c = _corner(ra.points[-1], ta, tb, da, db)
+            if c is not None:
+                parts.append(c)
     shape = shapely.union_all(parts)
     if shape.geom_type != "Polygon":  # keep the largest piece
         shape = max(shape.geoms, key=lambda g: g.area)
