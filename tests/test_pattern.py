@@ -159,6 +159,7 @@ def test_cli_pattern_usage_errors_exit_2(tmp_path, extra):
 
 
 def test_cli_pattern_bad_material_exits_2(tmp_path):
-    code = pattern_main(["pattern", "m.obj", "--seams", "4", "--roll-width", "1",
-                         "--out", str(tmp_path), "--material", "600,400,2,30"])  # fmt: skip
+    args = ["pattern", "m.obj", "--seams", "4", "--roll-width", "1",
+            "--out", str(tmp_path), "--material", "600,400,2,30"]  # fmt: skip
+    code = pattern_main(args)
     assert code == 2
