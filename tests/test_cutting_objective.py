@@ -50,6 +50,6 @@ def test_stress_objective_value_and_gradient():
         (jm, am), _ = f(x - e)
         assert bool(ap["valid"]) and bool(am["valid"])  # same cut topology
         fd = (jp - jm) / (2 * h)
-        # the flattening's tolerance (1e-9 relative) divided by h bounds the
+        # the flattening's tolerance (1e-10 relative) divided by h bounds the
         # difference quotient's noise: 1e-3 relative is far above it
         assert abs(fd - g[k]) <= 1e-3 * abs(g[k])

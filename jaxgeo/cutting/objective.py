@@ -202,13 +202,13 @@ def _flatten(x3, edges, ew, vmask, uv0):
         rotn = jnp.sum(r0[:, 0] * u[:, 1] - r0[:, 1] * u[:, 0]) / scale
         return r_e, pins, c / scale, rotn / scale
 
-    solver = optx.GaussNewton(rtol=1e-9, atol=1e-11, linear_solver=lx.QR())
+    solver = optx.GaussNewton(rtol=1e-10, atol=1e-12, linear_solver=lx.QR())
     sol = optx.least_squares(
         residuals,
         solver,
         jax.lax.stop_gradient(uv0),
         args=(L, sw),
-        max_steps=12,
+        max_steps=30,
         throw=False,
     )
     return sol.value, sol.result == optx.RESULTS.successful
