@@ -1,40 +1,152 @@
-"""`jaxgeo pattern MESH --seams N --roll-width W --out DIR`: seam layout,
-optimisation, flattened cloths (DXF, SVG), seams (OBJ) and a JSON report."""
+"""`jaxgeo pattern MESH --seams N --roll-width W --out DIR`: seam layout and its
+optimisation, cut cloths with prestress compensation and allowances (DXF, SVG),
+the reassembly stress check (figure, JSON report) and the seams (OBJ).
+
+Exit codes: 0 the pattern fits the roll, 2 usage error, 3 the pattern does not
+fit the roll (the message names the widest cloth and suggests a seam count)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
+
+#: exit code of a pattern whose widest cloth is wider than the roll
+DOES_NOT_FIT = 3
+
+
+def _floats(n: int, what: str):
+    def parse(text: str) -> tuple[float, ...]:
+        try:
+            v = tuple(float(t) for t in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what}: not numbers: {text!r}") from None
+        if len(v) == 1 and n == 2:
+            v = v * 2
+        if len(v) != n:
+            raise argparse.ArgumentTypeError(
+                f"{what}: expected {n} comma-separated numbers, got {text!r}"
+            )
+        if not all(math.isfinite(x) for x in v):
+            raise argparse.ArgumentTypeError(f"{what}: not finite: {text!r}")
+        return v
+
+    return parse
 
 
 def add_pattern_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "pattern",
-        help="optimise geodesic seams on a tent mesh and write cutting patterns",
+        help="optimise geodesic seams on a membrane mesh and write cutting patterns",
         description=__doc__,
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("mesh", help="mesh file (OBJ, PLY, STL, OFF, …) of an open tent")
     p.add_argument("--seams", type=int, required=True, help="seams (per peak ring)")
-    p.add_argument("--roll-width", type=float, required=True, help="fabric width")
+    p.add_argument(
+        "--roll-width", type=float, required=True, help="fabric roll width (m)"
+    )
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--valley", type=int, default=3, help="valley seams (2 peaks)")
     p.add_argument("--steps", type=int, default=25, help="BFGS steps per round")
     p.add_argument("--rounds", type=int, default=3, help="calibration rounds")
-    p.add_argument("--allowance", type=float, default=0.0, help="seam allowance")
+    p.add_argument(
+        "--method",
+        choices=("laser", "exact", "smooth"),
+        default="laser",
+        help="geodesic method of the final seams (the width optimisation "
+        "moves seams with the laser method)",
+    )
+    p.add_argument(
+        "--objective",
+        choices=("width", "stress"),
+        default="width",
+        help="what the seam optimisation minimises: roll fit and equal seams "
+        "(width), or the reassembly stress deviation (stress: not yet in the "
+        "CLI, see jaxgeo.cutting.objective)",
+    )
+    p.add_argument(
+        "--compensation",
+        type=_floats(2, "--compensation"),
+        default=(0.0, 0.0),
+        metavar="WARP,WEFT",
+        help="prestress compensation (%%): the cloth is cut smaller by this strain",
+    )
+    p.add_argument(
+        "--prestress",
+        type=_floats(2, "--prestress"),
+        default=(2.0, 2.0),
+        metavar="WARP,WEFT",
+        help="design prestress (kN/m)",
+    )
+    p.add_argument(
+        "--material",
+        type=_floats(4, "--material"),
+        default=(600.0, 400.0, 0.3, 30.0),
+        metavar="EW,EF,NU,G",
+        help="orthotropic membrane: warp and weft moduli (kN/m), Poisson ratio "
+        "ν_wf, shear modulus (kN/m)",
+    )
+    p.add_argument(
+        "--allowance",
+        type=_floats(2, "--allowance"),
+        default=(0.0, 0.0),
+        metavar="WELD[,BOUNDARY]",
+        help="allowances (m) outside weld lines and boundary lines",
+    )
+    p.add_argument(
+        "--warp",
+        choices=("principal", "strip"),
+        default="principal",
+        help="warp direction of each cloth: its principal axis, or the "
+        "direction of its strip of least width",
+    )
+    p.add_argument(
+        "--report", default=None, help="JSON report path (default OUT/report.json)"
+    )
     p.set_defaults(func=run_pattern)
     return p
+
+
+def _usage(msg: str) -> int:
+    print(f"jaxgeo pattern: {msg}", file=sys.stderr)
+    return 2
 
 
 def run_pattern(args: argparse.Namespace) -> int:
     import numpy as np
 
     from . import seams as sm
-    from .export import write_dxf, write_seams_obj, write_svg
+    from ._errors import JaxgeoError
+    from .cutting import (
+        Compensation,
+        Material,
+        Prestress,
+        compensate_pattern,
+        reassemble,
+    )
+    from .cutting.export import write_dxf, write_svg
+    from .cutting.fabricate import make_pieces, weld_mismatch
+    from .cutting.plots import deviation_figure
+    from .export import write_seams_obj
     from .mesh import load_mesh
 
+    if args.seams < 1 or not args.roll_width > 0:
+        return _usage("--seams must be >= 1 and --roll-width > 0")
+    if args.objective == "stress":
+        return _usage(
+            "--objective stress is not wired into the CLI yet; use "
+            "jaxgeo.cutting.objective from Python"
+        )
+    try:
+        material = Material(*args.material)
+        prestress = Prestress(*args.prestress)
+        compensation = Compensation(*args.compensation)
+    except JaxgeoError as e:
+        return _usage(str(e))
     t0 = time.time()
 
     def log(msg: str) -> None:
@@ -42,7 +154,10 @@ def run_pattern(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    mesh = load_mesh(args.mesh)
+    try:
+        mesh = load_mesh(args.mesh)
+    except (JaxgeoError, OSError, ValueError) as e:
+        return _usage(f"cannot read {args.mesh}: {e}")
     loops = sm.boundary_loops(mesh)
     log(f"{args.mesh}: {mesh.n_faces} faces, {len(loops)} boundary loops")
     if len(loops) == 2:
@@ -52,50 +167,95 @@ def run_pattern(args: argparse.Namespace) -> int:
         half = 0.1 * (xs.max() - xs.min())
         layout = sm.peaks_layout(mesh, args.seams, args.valley, half)
     else:
-        print("jaxgeo pattern: need a tent with 2 or 3 boundary loops", file=sys.stderr)
-        return 2
+        return _usage(
+            f"need a tent with 2 or 3 boundary loops, {args.mesh} has {len(loops)}"
+        )
     log(f"{layout.n_seams} seams; tracing (the first call compiles, ~40 s)")
     first, layout, pat, history = sm.fit_roll(
         mesh, layout, args.roll_width, rounds=args.rounds, steps=args.steps, log=log
     )
-    _, paths = sm.cut(mesh, layout)
+    cut, paths = sm.cut(mesh, layout, method=args.method)
+    if args.method != "laser":
+        from .pattern import make_pattern
+
+        pat = make_pattern(cut)
     polylines = [
         np.asarray(paths.points[i])[: int(paths.count[i])]
         for i in range(layout.n_seams)
     ]
     write_seams_obj(polylines, out / "seams.obj")
-    write_dxf(pat, out / "pattern.dxf", seam_allowance=args.allowance)
-    write_svg(pat, out / "pattern.svg")
-    fits = bool((pat.widths <= args.roll_width).all())
+    cloths = compensate_pattern(pat, compensation, warp=args.warp)
+    weld, boundary = args.allowance
+    pieces = make_pieces(cloths, weld, boundary)
+    check = reassemble(cloths, material, prestress)
+    per_seam, per_cloth = weld_mismatch(pieces)
+    write_dxf(pieces, out / "pattern.dxf")
+    write_svg(pieces, out / "pattern.svg")
+    fig = deviation_figure(cloths, check, f"{args.mesh}: reassembly check")
+    fig.savefig(out / "stress_deviation.png", dpi=110)
+    widths = np.array([p.width for p in pieces])
+    fits = bool((widths <= args.roll_width).all())
+    total = check.total_stats()
     report = {
         "mesh": str(args.mesh),
         "roll_width": args.roll_width,
+        "method": args.method,
+        "material": dict(zip(("e_warp", "e_weft", "nu", "g"), args.material)),
+        "prestress": dict(zip(("warp", "weft"), args.prestress)),
+        "compensation_percent": dict(zip(("warp", "weft"), args.compensation)),
+        "allowance": {"weld": weld, "boundary": boundary},
+        "all_fit": fits,
+        "stress_deviation": {k: total[k] for k in ("max", "rms", "mean")},
         "objective_start": first.j_start,
         "objective_end": history[-1][0] if history else first.j_start,
         "rounds": [{"objective": j, "widest": w} for j, w in history],
-        "all_fit": fits,
         "seams": [
             {
                 "loops": [int(a), int(b)],
                 "s": [float(x), float(y)],
                 "length": float(paths.length[i]),
+                "weld_length_mismatch": per_seam.get(i),
             }
             for i, (a, b, x, y) in enumerate(
                 zip(layout.loop_a, layout.loop_b, layout.s_a, layout.s_b)
             )
         ],
-        "cloths": [c.summary() for c in pat.cloths],
-        "seam_copy_difference": {
-            str(k): v for k, v in pat.seam_copy_difference().items()
-        },
+        "cloths": [
+            {
+                "name": p.name,
+                "width": p.width,
+                "length": p.length,
+                "area": p.area,
+                "warp_angle": c.warp_angle,
+                "weld_length_mismatch": per_cloth[k],
+                "stress_deviation": {
+                    key: v for key, v in check.cloth_stats(k).items() if key != "mean"
+                },
+                **c.cloth.summary(),
+            }
+            for k, (p, c) in enumerate(zip(pieces, cloths))
+        ],
     }
-    (out / "report.json").write_text(json.dumps(report, indent=2))
+    report_path = Path(args.report) if args.report else out / "report.json"
+    report_path.write_text(json.dumps(report, indent=2))
+    k = int(np.argmax(widths))
     log(
-        f"{len(pat.cloths)} cloths, widest {pat.widths.max():.4g} "
-        f"(roll {args.roll_width}); max strain "
-        f"{max(c.strain_max for c in pat.cloths):.3%}; written to {out}"
+        f"{len(pieces)} cloths, widest {pieces[k].name} {widths[k]:.4g} m "
+        f"(roll {args.roll_width} m); stress deviation RMS {total['rms']:.3g} kN/m, "
+        f"max {total['max']:.3g} kN/m; written to {out}"
     )
-    return 0 if fits else 1
+    if not fits:
+        n = layout.n_seams
+        suggest = math.ceil(args.seams * widths[k] / args.roll_width)
+        print(
+            f"jaxgeo pattern: the pattern does not fit the roll: cloth "
+            f"{pieces[k].name} needs {widths[k]:.3f} m (allowances included), the "
+            f"roll is {args.roll_width} m wide; try --seams {suggest} "
+            f"({n} seams now) or a wider roll",
+            file=sys.stderr,
+        )
+        return DOES_NOT_FIT
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:  # stand-alone use and tests

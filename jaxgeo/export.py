@@ -1,24 +1,28 @@
 """Export of cutting patterns: DXF (ezdxf), SVG, and seams as OBJ polylines.
 
-DXF layers: `CUT` one closed LWPOLYLINE per cloth (its outline, offset outward by
-the seam allowance when one is given), `SEAM` the seam lines of each cloth (open
-polylines, the sewing lines), `OUTLINE` the net outline when an allowance is
-added, `LABEL` the cloth numbers. Cloths are laid side by side along x, each
-turned so the roll runs along x and its width is along y.
+`write_dxf` and `write_svg` take either a `pattern.Pattern` (written without
+compensation, warp along each cloth's strip of least width, the same allowance on
+welds and boundaries) or a list of `cutting.fabricate.Piece` (compensated cut
+pieces). The writers and the layer list are in `jaxgeo.cutting.export`: one
+polyline per cut outline, per seam side and per boundary stretch.
 """
 
 from __future__ import annotations
 
 import os
 
-import ezdxf
 import numpy as np
 
-from .pattern import Cloth, Pattern
+from .cutting.compensate import compensate_pattern
+from .cutting.export import LAYERS, write_dxf as _write_dxf, write_svg as _write_svg
+from .cutting.fabricate import Piece, make_pieces
+from .cutting.material import Compensation
+from .pattern import Pattern
 
 __all__ = [
+    "LAYERS",
     "offset_polygon",
-    "placed_cloths",
+    "pieces",
     "write_dxf",
     "write_seams_obj",
     "write_svg",
@@ -43,72 +47,30 @@ def offset_polygon(poly: np.ndarray, d: float) -> np.ndarray:
     return p + bis * (d / cos)[:, None]
 
 
-def placed_cloths(pattern: Pattern, gap: float | None = None) -> list[np.ndarray]:
-    """Per cloth an x-offset vector placing the cloths side by side."""
-    widths = [c.uv[:, 0].max() for c in pattern.cloths]
-    gap = 0.05 * max(widths) if gap is None else gap
-    x, out = 0.0, []
-    for w in widths:
-        out.append(np.array([x, 0.0]))
-        x += w + gap
-    return out
+def pieces(pattern: Pattern, allowance: float = 0.0) -> list[Piece]:
+    """Uncompensated pieces of a pattern, warp along the strip of least width."""
+    cut = compensate_pattern(pattern, Compensation(0.0, 0.0), warp="strip")
+    return make_pieces(cut, allowance, allowance)
 
 
-def _seam_lines(c: Cloth) -> dict[int, list[np.ndarray]]:
-    return {s: [c.uv[e] for e in edges] for s, edges in c.seams.items()}
+def _as_pieces(pattern, allowance: float) -> list[Piece]:
+    return pieces(pattern, allowance) if isinstance(pattern, Pattern) else pattern
 
 
 def write_dxf(
-    pattern: Pattern, path: str | os.PathLike, seam_allowance: float = 0.0
+    pattern: Pattern | list[Piece],
+    path: str | os.PathLike,
+    seam_allowance: float = 0.0,
+    layout: str = "roll",
 ) -> None:
-    """Write the flattened cloths to a DXF file (layers in the module docstring)."""
-    doc = ezdxf.new(setup=True)
-    for name, color in (("CUT", 7), ("SEAM", 1), ("OUTLINE", 3), ("LABEL", 5)):
-        doc.layers.add(name, color=color)
-    msp = doc.modelspace()
-    for k, (c, off) in enumerate(zip(pattern.cloths, placed_cloths(pattern))):
-        outline = c.uv[c.outline] + off
-        cut = offset_polygon(outline, seam_allowance) if seam_allowance else outline
-        msp.add_lwpolyline(cut.tolist(), close=True, dxfattribs={"layer": "CUT"})
-        if seam_allowance:
-            msp.add_lwpolyline(
-                outline.tolist(), close=True, dxfattribs={"layer": "OUTLINE"}
-            )
-        for segs in _seam_lines(c).values():
-            for seg in segs:
-                msp.add_lwpolyline((seg + off).tolist(), dxfattribs={"layer": "SEAM"})
-        centre = outline.mean(axis=0)
-        msp.add_text(
-            f"{k}", height=0.2 * c.width, dxfattribs={"layer": "LABEL"}
-        ).set_placement(tuple(centre))
-    doc.saveas(os.fspath(path))
+    """Write the cloths to a DXF file (`jaxgeo.cutting.export.write_dxf`);
+    `seam_allowance` applies to a `Pattern` only."""
+    _write_dxf(_as_pieces(pattern, seam_allowance), path, layout)
 
 
-def write_svg(pattern: Pattern, path: str | os.PathLike, scale: float = 100.0) -> None:
-    """Write the flattened cloths to an SVG file (units: `scale` px per unit)."""
-    offs = placed_cloths(pattern)
-    parts = []
-    xmax = ymax = 0.0
-    for k, (c, off) in enumerate(zip(pattern.cloths, offs)):
-        q = (c.uv[c.outline] + off) * scale
-        xmax, ymax = max(xmax, q[:, 0].max()), max(ymax, q[:, 1].max())
-        pts = " ".join(f"{x:.3f},{-y:.3f}" for x, y in q)
-        parts.append(f'<polygon points="{pts}" fill="#eef" stroke="black"/>')
-        for segs in _seam_lines(c).values():
-            for seg in segs:
-                (x0, y0), (x1, y1) = (seg + off) * scale
-                parts.append(
-                    f'<line x1="{x0:.3f}" y1="{-y0:.3f}" x2="{x1:.3f}" '
-                    f'y2="{-y1:.3f}" stroke="red"/>'
-                )
-        cx, cy = q.mean(axis=0)
-        parts.append(f'<text x="{cx:.1f}" y="{-cy:.1f}" font-size="12">{k}</text>')
-    head = (
-        '<svg xmlns="http://www.w3.org/2000/svg" '
-        f'viewBox="-10 {-ymax - 10:.1f} {xmax + 20:.1f} {ymax + 20:.1f}">'
-    )
-    with open(path, "w") as f:
-        f.write("\n".join([head, *parts, "</svg>\n"]))
+def write_svg(pattern: Pattern | list[Piece], path: str | os.PathLike) -> None:
+    """Write the cloths nested in rows to an SVG file."""
+    _write_svg(_as_pieces(pattern, 0.0), path)
 
 
 def write_seams_obj(polylines: list[np.ndarray], path: str | os.PathLike) -> None:

@@ -67,10 +67,42 @@ class CutMesh:
     seam_of_edge: Int[np.ndarray, " K"]
     cloth_of_face: Int[np.ndarray, " F"]
     seam_points: list[np.ndarray]
+    #: how each vertex is made (see `sources`): an original vertex `("v", i)`,
+    #: seam `s`'s path point `j` `("p", s, j)`, or the centroid `("c", ids)`
+    origin: list[tuple] = dataclasses.field(default_factory=list)
 
     @property
     def n_cloths(self) -> int:
         return int(self.cloth_of_face.max()) + 1
+
+    def sources(
+        self, n_mesh_vertices: int, max_points: int, k: int = 8
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Each vertex as a weighted sum of at most `k` rows of
+        `[mesh.vertices; paths.points.reshape(-1, 3)]` (paths of capacity
+        `max_points`): `(index, weight)`, each `(V', k)`, so that the cut
+        vertices follow the seams differentiably (`jaxgeo.cutting.objective`)."""
+        n = len(self.vertices)
+        idx = np.zeros((n, k), np.int64)
+        w = np.zeros((n, k))
+        rows: list[dict[int, float]] = []
+        for o in self.origin:
+            if o[0] == "v":
+                rows.append({o[1]: 1.0})
+            elif o[0] == "p":
+                rows.append({n_mesh_vertices + o[1] * max_points + o[2]: 1.0})
+            else:
+                acc: dict[int, float] = {}
+                for i in o[1]:
+                    for key, val in rows[i].items():
+                        acc[key] = acc.get(key, 0.0) + val / len(o[1])
+                rows.append(acc)
+        for i, r in enumerate(rows):
+            if len(r) > k:
+                raise JaxgeoError(f"cut vertex {i} depends on {len(r)} > {k} points")
+            idx[i, : len(r)] = list(r)
+            w[i, : len(r)] = list(r.values())
+        return idx, w
 
     def cloth_seams(self) -> list[list[int]]:
         """Per cloth, the seams on its boundary (sorted)."""
@@ -89,7 +121,8 @@ class CutMesh:
 
 
 def _locations(mesh_np, path: Path, end_bary: np.ndarray) -> list[tuple]:
-    """A seam as a list of ('v', vertex) / ('e', edge, u) locations; endpoints are
+    """A seam as a list of (location, path index): ('v', vertex) or
+    ('e', edge, u) locations; endpoints are
     snapped onto the nearest side of their face (seam ends lie on the boundary,
     possibly inset by a hair for the laser ray)."""
     faces, edges, face_edges = mesh_np
@@ -120,8 +153,8 @@ def _locations(mesh_np, path: Path, end_bary: np.ndarray) -> list[tuple]:
                 loc = ("v", int(edges[e, 0]))
             elif u > 1 - SNAP:
                 loc = ("v", int(edges[e, 1]))
-        if not out or out[-1] != loc:
-            out.append(loc)
+        if not out or out[-1][0] != loc:
+            out.append((loc, j))
     return out
 
 
@@ -143,16 +176,18 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
     face_edges = np.asarray(mesh.face_edges)
     mesh_np = (faces, edges, face_edges)
     pts = [p for p in V]
+    origin: list[tuple] = [("v", i) for i in range(len(V))]
     edge_points: dict[int, list[tuple[float, int]]] = {}
     chords: dict[int, list[tuple[int, int, int]]] = {}
     seam_pairs: list[tuple[int, int, int]] = []
     seam_points: list[np.ndarray] = []
 
-    def vid(loc) -> int:
+    def vid(loc, sid: int, j: int) -> int:
         if loc[0] == "v":
             return loc[1]
         e, u = loc[1], loc[2]
         pts.append((1 - u) * V[edges[e, 0]] + u * V[edges[e, 1]])
+        origin.append(("p", sid, j))
         edge_points.setdefault(e, []).append((u, len(pts) - 1))
         return len(pts) - 1
 
@@ -165,8 +200,9 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
         return {loc[1]} if loc[0] == "v" else set(edges[loc[1]].tolist())
 
     for sid, (path, b0, b1) in enumerate(seams):
-        locs = _locations(mesh_np, path, np.stack([b0, b1]))
-        ids = [vid(loc) for loc in locs]
+        located = _locations(mesh_np, path, np.stack([b0, b1]))
+        locs = [loc for loc, _ in located]
+        ids = [vid(loc, sid, j) for loc, j in located]
         seam_points.append(np.asarray(ids))
         for (la, a), (lb, b) in zip(zip(locs, ids), zip(locs[1:], ids[1:])):
             seam_pairs.append((a, b, sid))
@@ -213,6 +249,7 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
                 new_faces.append(pc)
                 continue
             pts.append(np.mean([pts[i] for i in pc], axis=0))
+            origin.append(("c", list(pc)))
             c = len(pts) - 1
             new_faces += [[pc[i], pc[(i + 1) % len(pc)], c] for i in range(len(pc))]
     F = np.asarray(new_faces, np.int64)
@@ -220,7 +257,7 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
     pairs = np.asarray([(a, b) for a, b, _ in seam_pairs], np.int64).reshape(-1, 2)
     sids = np.asarray([s for _, _, s in seam_pairs], np.int64)
     labels = _cloth_labels(F, pairs)
-    cut = CutMesh(P, F, pairs, sids, labels, seam_points)
+    cut = CutMesh(P, F, pairs, sids, labels, seam_points, origin)
     # canonical cloth order (by seam lists), stable across layouts of one topology
     order = sorted(range(cut.n_cloths), key=lambda c: cut.cloth_seams()[c])
     rank = np.empty(len(order), np.int64)
@@ -408,6 +445,8 @@ class Cloth:
     strain_rms: float
     area_change: float
     seam_lengths: dict[int, tuple[float, float]]
+    #: the cloth's vertices as ids of `CutMesh.vertices`
+    vertex_ids: np.ndarray | None = None
 
     def summary(self) -> dict:
         return {
@@ -517,6 +556,7 @@ def make_pattern(cut: CutMesh) -> Pattern:
                 float(np.sqrt(np.mean(strain**2))),
                 float(area_change),
                 lengths,
+                used,
             )
         )
     return Pattern(cut, cloths)

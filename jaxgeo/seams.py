@@ -55,8 +55,7 @@ from .boundary import (
     pack_loops,
     packed_point,
 )
-from .geodesic import _solve
-from .locate import DEFAULT_MAX_DISTANCE
+from .geodesic import shortest_path
 from .mesh import Mesh
 from .normals import vertex_normals
 from .path import Path, Status
@@ -289,20 +288,32 @@ def _unwrap(pts: np.ndarray, centre: np.ndarray, side: float) -> np.ndarray:
 
 
 @eqx.filter_jit
-def _trace_batch(mesh, packed, loop_a, loop_b, s_a, s_b, options):
+def _trace_batch(mesh, packed, loop_a, loop_b, s_a, s_b, options, method="laser"):
     def one(la, lb, a, b):
         p1 = packed_point(mesh, packed, la, a, INSET)
         p2 = packed_point(mesh, packed, lb, b, INSET)
-        path = _solve(mesh, p1, p2, DEFAULT_MAX_DISTANCE, "uniform", options)[0]
+        path = shortest_path(
+            mesh,
+            p1,
+            p2,
+            method=method,
+            candidates=options.candidates,
+            max_points=options.max_points,
+            throw=False,
+        )
         return path, p1.bary, p2.bary
 
     return jax.vmap(one)(loop_a, loop_b, s_a, s_b)
 
 
 def trace_seams(
-    mesh: Mesh, layout: Layout, options: TraceOptions | None = None
+    mesh: Mesh,
+    layout: Layout,
+    options: TraceOptions | None = None,
+    method: str = "laser",
 ) -> tuple[Path, np.ndarray]:
-    """Trace every seam of `layout` (one vmapped, jitted call).
+    """Trace every seam of `layout` (one vmapped, jitted call of
+    `jaxgeo.shortest_path` with `method`).
 
     **Returns:** `(paths, end_bary)`: a batched `Path` (leading axis N) and the
     endpoints' barycentric coordinates `(N, 2, 3)`.
@@ -316,6 +327,7 @@ def trace_seams(
         jnp.asarray(layout.s_a),
         jnp.asarray(layout.s_b),
         options,
+        method,
     )
     return paths, np.stack([np.asarray(b1), np.asarray(b2)], axis=1)
 
@@ -572,12 +584,17 @@ def optimise(
     )
 
 
-def cut(mesh: Mesh, layout: Layout, options: TraceOptions | None = None):
+def cut(
+    mesh: Mesh,
+    layout: Layout,
+    options: TraceOptions | None = None,
+    method: str = "laser",
+):
     """Trace the seams of `layout` and cut `mesh` along them
     (`jaxgeo.pattern.cut_mesh`). Returns `(cut_mesh, paths)`."""
     from .pattern import cut_mesh
 
-    paths, ends = trace_seams(mesh, layout, options)
+    paths, ends = trace_seams(mesh, layout, options, method)
     bad = np.flatnonzero(np.asarray(paths.status) != Status.SUCCESS)
     if bad.size:
         raise JaxgeoError(f"seams {bad.tolist()} could not be traced")

@@ -28,6 +28,7 @@ __all__ = [
     "catenoid_parameter",
     "catenoid_parameter_roots",
     "cone_tent",
+    "four_point_sail",
     "icosphere",
     "saddle",
     "twin_peak_tent",
@@ -383,3 +384,26 @@ def saddle(
     z = height * (x**2 - y**2) / size**2
     v = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
     return v, _grid_faces(n, n)
+
+
+# --------------------------------------------------------------------------- sail
+
+
+def four_point_sail(
+    n: int = 16,
+    span: float = 6.0,
+    high: float = 2.0,
+    low: float = 0.0,
+    q_cable: float = 6.0,
+    q_membrane: float = 1.0,
+) -> tuple[Vertices, Faces]:
+    """Four-point sail (hypar) form-found by the force density method over the
+    square [0, span]² in plan, corners alternately at `low` and `high`, edge-cable
+    force density `q_cable`, membrane `q_membrane` (`jaxgeo.cutting.formfinding`,
+    which also gives the four edge cables by name). `2n²` faces, one boundary
+    loop, normals up. Unlike the other surfaces its vertices lie on no analytic
+    surface: it is an equilibrium shape."""
+    from .cutting.formfinding import four_point_sail as _sail
+
+    sail = _sail(n, span, high, low, q_cable, q_membrane)
+    return sail.vertices, sail.faces

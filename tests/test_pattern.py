@@ -50,43 +50,116 @@ def test_cone_tent_cloths(cone_pattern):
 def test_exports(cone_pattern, tmp_path):
     _, _, cut, paths, pat = cone_pattern
     write_dxf(pat, tmp_path / "p.dxf", seam_allowance=0.02)
-    doc = ezdxf.readfile(tmp_path / "p.dxf")
-    closed = [e for e in doc.modelspace().query("LWPOLYLINE") if e.closed]
-    assert len([e for e in closed if e.dxf.layer == "CUT"]) == len(pat.cloths)
-    assert doc.modelspace().query('LWPOLYLINE[layer=="SEAM"]')
+    msp = ezdxf.readfile(tmp_path / "p.dxf").modelspace()
+    cuts = msp.query('LWPOLYLINE[layer=="CUT"]')
+    assert len(cuts) == len(pat.cloths) and all(e.closed for e in cuts)
+    # one open polyline per seam side (2 per cloth) and per boundary stretch
+    # (the outer and inner ring of each cloth), never one per mesh edge
+    assert len(msp.query('LWPOLYLINE[layer=="WELD"]')) == 2 * len(pat.cloths)
+    assert len(msp.query('LWPOLYLINE[layer=="BOUNDARY"]')) == 2 * len(pat.cloths)
+    assert len(msp.query('LWPOLYLINE[layer=="WARP"]')) == len(pat.cloths)
+    labels = [e.dxf.text for e in msp.query('TEXT[layer=="LABEL"]')]
+    assert {f"C{k}" for k in range(16)} <= set(labels)
     write_svg(pat, tmp_path / "p.svg")
-    assert (tmp_path / "p.svg").read_text().count("<polygon") == len(pat.cloths)
+    svg = (tmp_path / "p.svg").read_text()
+    assert svg.count("<polygon") == len(pat.cloths)
+    w, h = (float(x) for x in svg.split('viewBox="0 0 ')[1].split('"')[0].split())
+    assert 0.5 < w / h < 3  # rows on a page, not one 35:1 strip
     pl = [np.asarray(paths.points[i])[: int(paths.count[i])] for i in range(16)]
     write_seams_obj(pl, tmp_path / "s.obj")
     assert (tmp_path / "s.obj").read_text().count("\nl ") == 16
 
 
-def test_cli_pattern_writes_a_dxf_that_fits(tmp_path):
-    v, f = surfaces.cone_tent(48, 12)
+def test_allowances_offset_the_cut_line(cone_pattern):
+    from shapely.geometry import LineString, Polygon
+
+    from jaxgeo.cutting import Compensation, compensate_pattern
+    from jaxgeo.cutting.fabricate import BOUNDARY, make_pieces, weld_mismatch
+
+    pat = cone_pattern[4]
+    cut = compensate_pattern(pat, Compensation(1.0, 2.0))
+    weld, edge = 0.02, 0.05
+    pieces = make_pieces(cut, weld, edge)
+    for p in pieces:
+        ring = Polygon(p.cut).exterior
+        assert Polygon(p.cut).contains(Polygon(p.net).buffer(-1e-9))
+        for r in p.runs:
+            d = weld if r.seam != BOUNDARY else edge
+            mid = LineString(r.points).interpolate(0.5, normalized=True)
+            # the middle of a run lies its allowance inside the cut line (a
+            # straight stretch; 2% covers the curvature of the run)
+            assert abs(ring.distance(mid) - d) <= 0.02 * d
+        # the label sits inside the cloth
+        assert Polygon(p.net).contains(__import__("shapely").Point(p.label_at))
+    per_seam, per_cloth = weld_mismatch(pieces)
+    assert sorted(per_seam) == list(range(16))
+    # both sides of a seam: the same compensation and flattened length within
+    # the flattening's seam tolerance (0.5%, test_cone_tent_cloths)
+    lengths = [r.length for p in pieces for r in p.runs if r.seam == 0]
+    assert max(abs(v) for v in per_seam.values()) <= 0.005 * lengths[0]
+    assert len(per_cloth) == 16
+
+
+def _tent_file(tmp_path):
     import trimesh
 
+    v, f = surfaces.cone_tent(48, 12)
     trimesh.Trimesh(v, f, process=False).export(tmp_path / "tent.obj")
-    roll = 0.4
+    return str(tmp_path / "tent.obj")
+
+
+def test_cli_pattern_writes_a_dxf_and_report_that_fit(tmp_path, capsys):
+    import json
+
+    roll = 0.45
     code = pattern_main(
-        [
-            "pattern",
-            str(tmp_path / "tent.obj"),
-            "--seams",
-            "16",
-            "--roll-width",
-            str(roll),
-            "--out",
-            str(tmp_path / "out"),
-            "--steps",
-            "3",
-            "--rounds",
-            "1",
-        ]
-    )
-    assert code == 0
+        ["pattern", _tent_file(tmp_path), "--seams", "16", "--roll-width", str(roll),
+         "--out", str(tmp_path / "out"), "--steps", "1", "--rounds", "1",
+         "--compensation", "0.5,1.0", "--prestress", "2,1.5",
+         "--material", "600,400,0.3,30", "--allowance", "0.01,0.02",
+         "--report", str(tmp_path / "r.json")]
+    )  # fmt: skip
+    assert code == 0, capsys.readouterr().err
     doc = ezdxf.readfile(tmp_path / "out" / "pattern.dxf")
     cuts = [e for e in doc.modelspace().query('LWPOLYLINE[layer=="CUT"]')]
     assert len(cuts) == 16 and all(e.closed for e in cuts)
     for e in cuts:
         pts = np.array([p[:2] for p in e.get_points()])
         assert strip_width(pts)[0] <= roll + 1e-9
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert len(report["cloths"]) == 16
+    for c in report["cloths"]:
+        assert {"width", "area", "weld_length_mismatch", "stress_deviation"} <= set(c)
+        assert c["width"] <= roll and set(c["stress_deviation"]) >= {"max", "rms"}
+    total = report["stress_deviation"]
+    assert 0 < total["rms"] <= total["max"]
+    assert (tmp_path / "out" / "stress_deviation.png").stat().st_size > 0
+
+
+def test_cli_pattern_that_does_not_fit_says_so(tmp_path, capsys):
+    code = pattern_main(
+        ["pattern", _tent_file(tmp_path), "--seams", "8", "--roll-width", "0.3",
+         "--out", str(tmp_path / "out"), "--steps", "1", "--rounds", "1"]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 3
+    assert "does not fit the roll" in err and "--seams" in err and "0.3 m" in err
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--compensation", "1,2,3"], ["--material", "600,x,0.3,30"],
+     ["--objective", "beauty"], ["--method", "fast"]],
+)  # fmt: skip
+def test_cli_pattern_usage_errors_exit_2(tmp_path, extra):
+    with pytest.raises(SystemExit) as e:
+        pattern_main(["pattern", "m.obj", "--seams", "4", "--roll-width", "1",
+                      "--out", str(tmp_path), *extra])  # fmt: skip
+    assert e.value.code == 2
+
+
+def test_cli_pattern_bad_material_exits_2(tmp_path):
+    args = ["pattern", "m.obj", "--seams", "4", "--roll-width", "1",
+            "--out", str(tmp_path), "--material", "600,400,2,30"]  # fmt: skip
+    code = pattern_main(args)
+    assert code == 2

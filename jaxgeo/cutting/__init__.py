@@ -1,0 +1,18 @@
+"""Cutting patterns a fabricator can cut: material and prestress compensation,
+warp direction, allowances and export, the reassembly stress check, the
+differentiable seam objective and its optimiser, and force-density form finding.
+
+One job per module: `material` (orthotropic membrane, prestress, compensation),
+`compensate` (warp frame and cut shape), `reassembly` (CST stress check),
+`fabricate` (allowances, weld matching, DXF/SVG), `formfinding` (force density),
+`objective` and `optimise` (the differentiable loop), `plots` (figures).
+"""
+
+from .compensate import CutCloth as CutCloth, compensate_pattern as compensate_pattern
+from .material import (
+    BoundaryCompensation as BoundaryCompensation,
+    Compensation as Compensation,
+    Material as Material,
+    Prestress as Prestress,
+)
+from .reassembly import Reassembly as Reassembly, reassemble as reassemble
