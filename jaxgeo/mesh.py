@@ -26,6 +26,7 @@ from jaxtyping import Array, Float, Int
 from scipy.sparse.csgraph import connected_components
 
 from ._errors import JaxgeoError
+from ._precision import warn_if_x64_disabled
 
 #: A face whose area is below this fraction of the square of its longest edge is a
 #: needle. For a triangle, area / longest² = h / (2 L), with h its height over the
@@ -314,6 +315,7 @@ class Mesh(eqx.Module):
 
     def __init__(self, vertices: Any, faces: Any):
         v, f = _check_arrays(vertices, faces)
+        warn_if_x64_disabled(v)
         _check_faces(v, f)
         edges, edge_faces, face_edges, consistent = _edges(f)
         _check_vertex_fans(f, edges, edge_faces, v.shape[0])
