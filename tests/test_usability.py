@@ -168,3 +168,16 @@ def test_enable_compilation_cache_stores_compiled_code(tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == [str(env), str(cache)] and env.is_dir()
     assert any(cache.iterdir())  # the second function's executable is on disk
+
+
+def test_pyproject_ships_every_example_mesh():
+    """setuptools package-data names the example files, so a wheel has them (an
+    editable install reads the source tree and would not notice)."""
+    import fnmatch
+
+    tomllib = pytest.importorskip("tomllib")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    with open(os.path.join(root, "pyproject.toml"), "rb") as f:
+        globs = tomllib.load(f)["tool"]["setuptools"]["package-data"]["jaxgeo.data"]
+    for name in EXAMPLES:
+        assert any(fnmatch.fnmatch(f"{name}.obj", g) for g in globs), name
