@@ -120,6 +120,10 @@ class Path(eqx.Module):
             )
         return Status(_concrete_int(self.status, "outcome"))
 
+    def __bool__(self) -> bool:
+        # without this, `if path:` would call __len__ and fail on a single path
+        return True
+
     def __len__(self) -> int:
         """The batch size (rows of a `shortest_paths` result)."""
         n = _batch_size(self)

@@ -4,8 +4,10 @@ Every ```python block (in order, one namespace, one fresh Python process) and
 every command line of every ```bash block (in a temporary directory, one shell
 each, in order) is run as written; only the lines that install the package or run
 the tests are skipped. Cheap tests check that they parse; running them is slow
-(JIT compilation, `jaxgeo validate` and `jaxgeo pattern`): about 5 minutes on 2
-cores with a warm compilation cache (`pytest -m slow tests/test_readme.py`).
+(JIT compilation, three `jaxgeo validate` runs and `jaxgeo pattern`): 18 min on
+a shared 2-core machine (533 s of CPU) when the README's repeated `jaxgeo validate`
+and `jaxgeo pattern` lines (126 s, 36 s) still ran twice; about 15 min now
+(`pytest -m slow tests/test_readme.py`).
 """
 
 from __future__ import annotations
@@ -37,12 +39,18 @@ def _skipped(line: str) -> bool:
 
 
 def _command_lines() -> list[str]:
+    """The command lines in README order, without their comments; a command that
+    appears twice (e.g. in the overview and in its own section) runs once."""
     lines = []
     for block in _blocks("bash"):
         for line in block.splitlines():
             line = line.strip()
-            if line and not line.startswith("#") and not _skipped(line):
-                lines.append(line)
+            if not line or line.startswith("#") or _skipped(line):
+                continue
+            words = shlex.split(line, comments=True)
+            command = shlex.join(words) if words[0] == "jaxgeo" else line
+            if command not in lines:
+                lines.append(command)
     return lines
 
 
@@ -88,7 +96,7 @@ def test_python_blocks_parse():
 @pytest.mark.parametrize("line", [c for c in COMMANDS if c.startswith("jaxgeo ")])
 def test_command_lines_parse(line):
     """Every option of every README command exists (cheap: argparse only)."""
-    words = shlex.split(line, comments=True)[1:]
+    words = shlex.split(line)[1:]
     try:
         build_parser().parse_args(words)
     except SystemExit as e:  # argparse's usage error

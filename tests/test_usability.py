@@ -59,6 +59,7 @@ def test_polylines_of_a_batch(batch):
     assert len(single.polylines()) == 1
     with pytest.raises(TypeError):
         len(single)
+    assert single and paths  # truthy like any object, never len()'s TypeError
     with pytest.raises(jg.JaxgeoError, match="has no rows"):
         single[0]
 
