@@ -119,7 +119,7 @@ def test_help_exits_0_and_every_option_says_its_default(capsys):
     subparsers = next(
         a for a in parser._actions if isinstance(a, argparse._SubParsersAction)
     )
-    for name in ("path", "paths", "surface"):
+    for name in ("path", "paths", "surface", "validate"):
         for action in subparsers.choices[name]._actions:
             if isinstance(action, argparse._HelpAction):
                 continue
