@@ -182,3 +182,11 @@ def test_pyproject_ships_every_example_mesh():
         globs = tomllib.load(f)["tool"]["setuptools"]["package-data"]["jaxgeo.data"]
     for name in EXAMPLES:
         assert any(fnmatch.fnmatch(f"{name}.obj", g) for g in globs), name
+
+
+def test_float32_note_names_the_cause_only_in_float32():
+    from jaxgeo._precision import float32_note
+
+    note = float32_note(np.float32)
+    assert "float32" in note and "jax_enable_x64" in note
+    assert float32_note(np.float64) == ""
