@@ -1,7 +1,10 @@
 """jaxgeo: differentiable geodesics on triangle meshes, in JAX."""
 
+from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._errors import JaxgeoError as JaxgeoError
+from ._precision import PrecisionWarning as PrecisionWarning
 from .batch import shortest_paths as shortest_paths
+from .data import example_mesh_path as example_mesh_path
 from .geodesic import path_length as path_length, shortest_path as shortest_path
 from .locate import SurfacePoint as SurfacePoint, locate as locate
 from .mesh import Mesh as Mesh, load_mesh as load_mesh

@@ -29,6 +29,7 @@ from scipy.sparse.csgraph import connected_components
 from ._errors import JaxgeoError
 from ._fans import vertex_fans
 from ._landmarks import DEFAULT_LANDMARKS, landmark_forests
+from ._precision import warn_if_x64_disabled
 
 #: A face whose area is below this fraction of the square of its longest edge is a
 #: needle. For a triangle, area / longest² = h / (2 L), with h its height over the
@@ -401,6 +402,7 @@ class Mesh(eqx.Module):
         self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS
     ):
         v, f = _check_arrays(vertices, faces)
+        warn_if_x64_disabled(v)
         _check_faces(v, f)
         edges, edge_faces, face_edges, consistent = _edges(f)
         _check_vertex_fans(f, v.shape[0])

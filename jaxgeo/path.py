@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterator
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from ._errors import JaxgeoError
 from ._numerics import safe_norm
 
 
@@ -93,11 +97,64 @@ class Path(eqx.Module):
     def n_branch_points(self) -> Int[Array, ""]:
         return jnp.sum(self.branch)
 
-    def polyline(self):
-        """The path's points as a numpy array `(count, 3)` (not jit-able)."""
-        import numpy as np
+    def polyline(self) -> np.ndarray:
+        """The path's points as a numpy array `(count, 3)` (not jit-able). On a
+        batch, `polylines()` gives one per row."""
+        if _batch_size(self) is not None:
+            raise JaxgeoError(
+                f"polyline() is for a single path; this is a batch of "
+                f"{_batch_size(self)} paths: use paths.polylines() (a list of "
+                "(count_i, 3) arrays) or paths[i].polyline()"
+            )
+        return np.asarray(self.points)[: _concrete_int(self.count, "polyline()")]
 
-        return np.asarray(self.points)[: int(self.count)]
+    def polylines(self) -> list[np.ndarray]:
+        """The points of every row of a batch, a list of `(count_i, 3)` numpy
+        arrays (rows that failed included: check `status`); a single path gives a
+        list of one."""
+        if _batch_size(self) is None:
+            return [self.polyline()]
+        return [row.polyline() for row in self]
+
+    @property
+    def outcome(self) -> Status:
+        """How the trace ended, as a `Status` (`.name`, `.message`); `status` holds
+        the same as an integer array. A single, concrete path only: under
+        `jax.jit` compare `path.status == Status.SUCCESS`."""
+        if _batch_size(self) is not None:
+            raise JaxgeoError(
+                "outcome is for a single path; for a batch use "
+                "[p.outcome for p in paths] or paths.status"
+            )
+        return Status(_concrete_int(self.status, "outcome"))
+
+    def __bool__(self) -> bool:
+        # without this, `if path:` would call __len__ and fail on a single path
+        return True
+
+    def __len__(self) -> int:
+        """The batch size (rows of a `shortest_paths` result)."""
+        n = _batch_size(self)
+        if n is None:
+            raise TypeError("len() of a single Path: only batches have rows")
+        return n
+
+    def __getitem__(self, i) -> Path:
+        """Row `i` of a batch as a single `Path` (an index array or slice gives a
+        smaller batch)."""
+        n = _batch_size(self)
+        if n is None:
+            raise JaxgeoError(
+                "a single Path has no rows; indexing is for shortest_paths results"
+            )
+        if isinstance(i, (int, np.integer)) and not -n <= i < n:
+            raise IndexError(f"row {i} out of range for a batch of {n} paths")
+        return jax.tree.map(lambda x: x[i], self)
+
+    def __iter__(self) -> Iterator[Path]:
+        """The rows of a batch, each a single `Path`."""
+        for i in range(len(self)):
+            yield self[i]
 
 
 def polyline_length(
@@ -114,3 +171,22 @@ def pad_tail(points: Float[Array, "M 3"], count: Int[Array, ""]) -> Float[Array,
     """Repeat the last live point into the unused part of the buffer."""
     idx = jnp.minimum(jnp.arange(points.shape[0]), jnp.maximum(count - 1, 0))
     return points[idx]
+
+
+def _batch_size(path: Path) -> int | None:
+    """Rows of a batched path (leading axis of `count`), None for a single path."""
+    shape = np.shape(path.count)
+    return shape[0] if len(shape) == 1 else None
+
+
+def _concrete_int(x, what: str) -> int:
+    try:
+        return int(x)
+    except (
+        jax.errors.ConcretizationTypeError,
+        jax.errors.TracerIntegerConversionError,
+    ):
+        raise JaxgeoError(
+            f"{what} needs a concrete path, not one traced under jax.jit/vmap; "
+            "inside a transformation use the arrays (status, count, points)"
+        ) from None

@@ -15,6 +15,7 @@ with no preferred diagonal direction.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import scipy.optimize
@@ -31,6 +32,8 @@ __all__ = [
     "four_point_sail",
     "icosphere",
     "saddle",
+    "save",
+    "SURFACES",
     "twin_peak_tent",
     "uv_sphere",
 ]
@@ -407,3 +410,62 @@ def four_point_sail(
 
     sail = _sail(n, span, high, low, q_cable, q_membrane)
     return sail.vertices, sail.faces
+
+
+# --------------------------------------------------------------------------- export
+
+#: The generators `save` (and `jaxgeo surface NAME`) can write, by name.
+SURFACES = {
+    "catenoid": catenoid,
+    "cone_tent": cone_tent,
+    "four_point_sail": four_point_sail,
+    "icosphere": icosphere,
+    "saddle": saddle,
+    "twin_peak_tent": twin_peak_tent,
+    "uv_sphere": uv_sphere,
+}
+
+#: Decimals of OBJ coordinates: 17 keeps a coordinate to ~1e-17 absolute (below
+#: float64 rounding for |x| >= 0.1), so a written surface reads back on the surface.
+OBJ_DIGITS = 17
+
+
+def save(name: str, path: str | os.PathLike, **params) -> str:
+    """Write the built-in surface `name` (a key of `SURFACES`) to `path`.
+
+    `params` are the generator's keyword arguments, e.g.
+    `save("cone_tent", "tent.obj", n_around=48, n_radial=12)`. The format follows
+    the extension (anything trimesh writes: .obj, .ply, .stl, .off, ...); vertex
+    order is kept. Returns the path written.
+    """
+    if name not in SURFACES:
+        raise JaxgeoError(
+            f"unknown surface {name!r}; expected one of {', '.join(sorted(SURFACES))}"
+        )
+    try:
+        v, f = SURFACES[name](**params)
+    except TypeError as e:  # a keyword the generator does not take
+        raise JaxgeoError(f"surfaces.{name}: {e}") from e
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower().lstrip(".")
+    if not ext:
+        raise JaxgeoError(f"{path}: no extension to choose the format (e.g. .obj)")
+    tm = trimesh.Trimesh(v, f, process=False)
+    args = ", ".join(f"{k}={val!r}" for k, val in params.items())
+    try:
+        if ext == "obj":
+            text = trimesh.exchange.obj.export_obj(
+                tm,
+                include_normals=False,
+                include_color=False,
+                include_texture=False,
+                digits=OBJ_DIGITS,
+                header=f"jaxgeo.surfaces.{name}({args})",
+            )
+            with open(path, "w") as fh:
+                fh.write(text)
+        else:
+            tm.export(path, file_type=ext)
+    except (OSError, ValueError, KeyError) as e:
+        raise JaxgeoError(f"could not write {path}: {type(e).__name__}: {e}") from e
+    return path
