@@ -95,7 +95,9 @@ def _turn(n, closed, p_from, p_to_ccw, p_to_cw):
     ccw_ok = closed | (p_to_ccw >= p_from)
     cw_ok = closed | (p_to_cw <= p_from)
     use_ccw = ccw_ok & (~cw_ok | (ccw <= cw))
-    return jnp.where(use_ccw, 1, -1), jnp.where(use_ccw, ccw, cw), ccw_ok | cw_ok
+    direction = jnp.where(use_ccw, 1, -1).astype(jnp.int32)
+    count = jnp.where(use_ccw, ccw, cw).astype(jnp.int32)
+    return direction, count, ccw_ok | cw_ok
 
 
 def corridor_from_vertices(

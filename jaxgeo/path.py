@@ -29,7 +29,7 @@ class Status(enum.IntEnum):
     FAR_FROM_SURFACE = 3
     #: The endpoints lie on different connected components of the mesh.
     DIFFERENT_COMPONENTS = 4
-    #: The exact refinement could not complete (see `jaxgeo.refine`).
+    #: The exact refinement could not complete (see `jaxgeo.exact`).
     REFINE_FAILED = 5
 
     @property

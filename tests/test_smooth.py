@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 import jaxgeo
+import jaxgeo as jg
 from jaxgeo import validation
 from jaxgeo._errors import JaxgeoError
 from jaxgeo._phong import phong_point, segment_length
 from jaxgeo.locate import SurfacePoint
 from jaxgeo.mesh import Mesh
 from jaxgeo.normals import vertex_normals
-from jaxgeo.refine import exact_geodesic
 from jaxgeo.smooth import (
     phong_normals,
     smooth_geodesic,
@@ -42,9 +42,10 @@ def _vertex_point(faces: np.ndarray, i: int) -> SurfacePoint:
 def _smooth(mesh: Mesh, start: SurfacePoint, end: SurfacePoint, **options):
     """The exact polyhedral geodesic's strip, then the smooth geodesic with strip
     repair."""
-    ex = exact_geodesic(mesh, int(start.face), start.bary, int(end.face), end.bary)
+    ex = jg.shortest_path(mesh, start, end, method="exact")
+    n = int(ex.count)
     kinds, elements, params = (
-        np.asarray(x)[1:-1] for x in (ex.kinds, ex.elements, ex.params)
+        np.asarray(x)[1 : n - 1] for x in (ex.kinds, ex.elements, ex.params)
     )
     return smooth_shortest_path(
         mesh, start, end, elements, params, kinds, capacity=CAPACITY, **options
@@ -263,12 +264,11 @@ SMALL = 64  # the buffer of every smooth_path test: one compiled shape
 
 def _exact_buffers(mesh: Mesh, start: SurfacePoint, end: SurfacePoint):
     """The exact polyhedral geodesic as `Path`-format buffers of size SMALL."""
-    ex = exact_geodesic(mesh, int(start.face), start.bary, int(end.face), end.bary)
-    n = int(np.asarray(ex.kinds).shape[0])
-    assert n <= SMALL
+    ex = jg.shortest_path(mesh, start, end, method="exact", max_points=SMALL)
+    n = int(ex.count)
 
     def pad(x):
-        x = np.asarray(x)
+        x = np.asarray(x)[:n]
         return jnp.asarray(np.concatenate([x, np.zeros(SMALL - n, x.dtype)]))
 
     return pad(ex.kinds), pad(ex.elements), pad(ex.params), jnp.asarray(n)

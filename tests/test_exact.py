@@ -1,0 +1,209 @@
+"""The exact engine (`jaxgeo.exact`, the default method): JAX-native, equal to the
+exact MMP distance of pygeodesic, jit/vmap/grad.
+
+Tolerances: the engine's length is the planar distance in an unfolding of the
+corridor, exact up to rounding that grows with the number of faces unfolded
+(~1e-14 relative for the small meshes here); pygeodesic's MMP is exact up to its
+own rounding. "Equal" below is 1e-9 relative, the issue's bound, far above both.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pygeodesic.geodesic as pg
+import pytest
+import trimesh
+
+import jaxgeo as jg
+from jaxgeo import surfaces
+from jaxgeo.locate import SurfacePoint
+
+from .helpers import package_mesh, unit_icosphere
+
+EQUAL = 1e-9  # relative: the acceptance bound (see the module docstring)
+POINTS = 256  # one path capacity for every test: compiled shapes are reused
+
+
+def vertex_point(mesh: jg.Mesh, v: int) -> SurfacePoint:
+    faces = np.asarray(mesh.faces)
+    f = int(np.flatnonzero((faces == v).any(1))[0])
+    return SurfacePoint(jnp.asarray(f), jnp.asarray((faces[f] == v).astype(float)))
+
+
+@functools.cache
+def torus() -> jg.Mesh:
+    """A handle: two homotopy classes of paths between most pairs."""
+    tm = trimesh.creation.torus(
+        major_radius=1.0, minor_radius=0.35, major_sections=24, minor_sections=10
+    )
+    return jg.Mesh(tm.vertices, tm.faces)
+
+
+@functools.cache
+def holed_plate() -> jg.Mesh:
+    """A flat annulus with a wavy lift: a hole to go round and boundary
+    vertices to wrap."""
+    v, f = surfaces.saddle(n=12)
+    v = np.asarray(v, float)
+    r = np.linalg.norm(v[:, :2], axis=1)
+    keep = np.flatnonzero(r > 0.3 * r.max())
+    faces = np.asarray(f)
+    ok = np.isin(faces, keep).all(1)
+    tm = trimesh.Trimesh(v, faces[ok], process=False)
+    tm.remove_unreferenced_vertices()
+    return jg.Mesh(tm.vertices, tm.faces)
+
+
+def _compare(mesh: jg.Mesh, n_pairs: int, seed: int) -> np.ndarray:
+    """Relative differences (jaxgeo − MMP) / MMP over random vertex pairs, solved
+    as one batch."""
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    algo = pg.PyGeodesicAlgorithmExact(v, f)
+    rng = np.random.default_rng(seed)
+    pairs = rng.integers(0, mesh.n_vertices, (n_pairs, 2))
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    paths = jg.shortest_paths(mesh, v[pairs[:, 0]], v[pairs[:, 1]], max_points=POINTS)
+    assert np.all(paths.status == jg.Status.SUCCESS)
+    ref = np.array([algo.geodesicDistance(int(a), int(b))[0] for a, b in pairs])
+    return (np.asarray(paths.length) - ref) / ref
+
+
+def _assert_exact(rel: np.ndarray, rate: float) -> None:
+    scale = 64 * np.finfo(np.float64).eps
+    assert np.all(rel >= -1e3 * scale), rel.min()  # never below MMP beyond rounding
+    assert np.all(rel <= 1e-3), rel.max()  # never far above
+    assert np.mean(np.abs(rel) <= EQUAL) >= rate, np.sort(rel)[-5:]
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: unit_icosphere(2),
+        lambda: jg.Mesh(*surfaces.catenoid(n_around=24, n_height=10)),
+        holed_plate,
+    ],
+    ids=["icosphere", "catenoid", "holed-plate"],
+)
+def test_equals_mmp_on_random_vertex_pairs(make):
+    _assert_exact(_compare(make(), 40, seed=0), rate=0.97)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "make",
+    [
+        torus,
+        lambda: jg.load_mesh(package_mesh("pymeshlab/tests/sample_meshes/bone.ply")),
+    ],
+    ids=["torus", "bone.ply"],
+)
+def test_equals_mmp_on_handles_and_real_meshes(make):
+    _assert_exact(_compare(make(), 60, seed=1), rate=0.97)
+
+
+def test_no_host_callback_and_one_compiled_loop():
+    mesh = unit_icosphere(2)
+    v = np.asarray(mesh.vertices)
+    jaxpr = jax.make_jaxpr(lambda a, b: jg.path_length(mesh, a, b, max_points=POINTS))(
+        jnp.asarray(v[0]), jnp.asarray(v[40])
+    )
+    text = str(jaxpr)
+    assert "callback" not in text
+    batched = jax.make_jaxpr(
+        jax.vmap(lambda a, b: jg.path_length(mesh, a, b, max_points=POINTS))
+    )(jnp.asarray(v[:8]), jnp.asarray(v[8:16]))
+    assert "callback" not in str(batched)
+
+
+def test_jit_vmap_matches_single_calls():
+    mesh = unit_icosphere(2)
+    v = np.asarray(mesh.vertices)
+    a, b = v[:6], v[[50, 60, 70, 80, 90, 100]]
+    f = jax.jit(jax.vmap(lambda p, q: jg.path_length(mesh, p, q, max_points=POINTS)))
+    batch = np.asarray(f(jnp.asarray(a), jnp.asarray(b)))
+    single = [
+        float(jg.path_length(mesh, p, q, max_points=POINTS)) for p, q in zip(a, b)
+    ]
+    np.testing.assert_allclose(batch, single, rtol=1e-12)
+
+
+def test_gradient_matches_central_differences():
+    """d length / d vertices and d length / d endpoint barycentrics, against
+    central differences of step 1e-6 (truncation ~1e-12, rounding ~1e-10 /
+    1e-6 = 1e-10: agreement to 1e-6 relative is far inside both)."""
+    mesh = jg.Mesh(*surfaces.catenoid(n_around=24, n_height=10))
+    faces = np.asarray(mesh.faces)
+    start = SurfacePoint(jnp.asarray(3), jnp.asarray([0.2, 0.5, 0.3]))
+    end = SurfacePoint(
+        jnp.asarray(int(faces.shape[0] * 0.6)), jnp.asarray([0.3, 0.3, 0.4])
+    )
+
+    def length(vertices, bary):
+        m = mesh.with_vertices(vertices)
+        return jg.path_length(m, SurfacePoint(start.face, bary), end, max_points=POINTS)
+
+    v0, b0 = mesh.vertices, start.bary
+    gv, gb = jax.grad(length, argnums=(0, 1))(v0, b0)
+    rng = np.random.default_rng(0)
+    h = 1e-6
+    for _ in range(3):
+        d = jnp.asarray(rng.normal(size=v0.shape))
+        fd = (length(v0 + h * d, b0) - length(v0 - h * d, b0)) / (2 * h)
+        assert abs(float(fd) - float(jnp.sum(gv * d))) <= 1e-6 * abs(float(fd)) + 1e-9
+    db = jnp.asarray([1.0, -1.0, 0.0])
+    fd = (length(v0, b0 + h * db) - length(v0, b0 - h * db)) / (2 * h)
+    assert abs(float(fd) - float(gb @ db)) <= 1e-6 * abs(float(fd)) + 1e-9
+
+
+def test_points_lie_on_their_elements_and_sum_to_the_length():
+    mesh = unit_icosphere(2)
+    v = np.asarray(mesh.vertices)
+    p = jg.shortest_path(mesh, v[3], v[200], max_points=POINTS)
+    n = int(p.count)
+    pts = np.asarray(p.points)[:n]
+    np.testing.assert_allclose(
+        np.linalg.norm(np.diff(pts, axis=0), axis=1).sum(), float(p.length), rtol=1e-12
+    )
+    edges = np.asarray(mesh.edges)
+    for k, e, u, x in zip(
+        np.asarray(p.kinds)[1 : n - 1],
+        np.asarray(p.elements)[1 : n - 1],
+        np.asarray(p.params)[1 : n - 1],
+        pts[1:-1],
+    ):
+        if k == jg.path.EDGE:
+            a, b = v[edges[e]]
+            np.testing.assert_allclose(x, (1 - u) * a + u * b, atol=1e-12)
+        else:
+            np.testing.assert_allclose(x, v[e], atol=1e-12)
+    assert p.stats["starts"] >= 1 and p.stats["iterations"] >= 1
+
+
+def test_same_face_and_identical_endpoints():
+    mesh = unit_icosphere(2)
+    sp = SurfacePoint(jnp.asarray(5), jnp.asarray([0.2, 0.3, 0.5]))
+    same = jg.shortest_path(mesh, sp, sp, max_points=POINTS)
+    assert float(same.length) == 0.0 and int(same.count) == 2
+    other = SurfacePoint(jnp.asarray(5), jnp.asarray([0.6, 0.3, 0.1]))
+    p = jg.shortest_path(mesh, sp, other, max_points=POINTS)
+    chord = np.linalg.norm(np.asarray(other.position(mesh) - sp.position(mesh)))
+    assert abs(float(p.length) - chord) <= 1e-15 * 10
+
+
+def test_method_objects_carry_options():
+    mesh = unit_icosphere(2)
+    v = np.asarray(mesh.vertices)
+    a = jg.shortest_path(
+        mesh, v[0], v[150], method=jg.Exact(max_starts=1), max_points=POINTS
+    )
+    b = jg.shortest_path(mesh, v[0], v[150], method="exact", max_points=POINTS)
+    assert int(a.stats["starts"]) == 1 and int(b.stats["starts"]) == 4
+    assert float(b.length) <= float(a.length) * (1 + 1e-12)
+    with pytest.raises(jg.JaxgeoError, match="unknown method"):
+        jg.shortest_path(mesh, v[0], v[1], method="dijkstra")
+    with pytest.raises(jg.JaxgeoError, match="candidates"):
+        jg.shortest_path(mesh, v[0], v[1], method=jg.Laser(candidates="some"))
