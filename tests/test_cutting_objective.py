@@ -19,6 +19,9 @@ from jaxgeo.cutting import (
 from jaxgeo.cutting.objective import Settings, evaluate, make_template
 from jaxgeo.pattern import make_pattern
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 MATERIAL = Material(600.0, 400.0, 0.3, 30.0)
 PRESTRESS = Prestress(2.0, 1.5)
 

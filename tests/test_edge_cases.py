@@ -25,6 +25,9 @@ from jaxgeo.path import VERTEX
 
 from .helpers import unit_icosphere
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 geodesic = pytest.importorskip("pygeodesic.geodesic")
 
 N = 6  # grid cells per side

@@ -33,6 +33,9 @@ from jaxgeo import surfaces
 from jaxgeo.path import EDGE, VERTEX
 from jaxgeo.replay import replay
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 N_AROUND, N_RINGS = 24, 10  # 480 faces
 MAX_POINTS = 64
 H = 1e-6  # finite-difference step

@@ -15,6 +15,9 @@ from jaxgeo import surfaces
 
 from .helpers import face_points, position, unit_icosphere
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 geodesic = pytest.importorskip("pygeodesic.geodesic")
 
 N = 12  # grid cells per side of the flat domains (h = 1/6 on [-1, 1]²)

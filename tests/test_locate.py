@@ -9,6 +9,9 @@ from jaxgeo.locate import snap
 
 from .helpers import unit_icosphere
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 MESH = unit_icosphere(2)
 
 

@@ -12,6 +12,9 @@ import jaxgeo as jg
 from jaxgeo import surfaces
 from jaxgeo.validation import catenoid_geodesic_length
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 
 @functools.cache
 def catenoid():

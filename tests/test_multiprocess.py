@@ -26,6 +26,9 @@ import pytest
 
 from . import _multiprocess_worker as worker
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parent.parent
 PROCESSES, DEVICES_PER_PROCESS = 2, 2
 #: Seconds for all processes of one launch (each takes ~10 s of CPU when alone).

@@ -10,6 +10,9 @@ from jaxgeo._pattern_cli import main as pattern_main
 from jaxgeo.export import offset_polygon, write_dxf, write_seams_obj, write_svg
 from jaxgeo.pattern import make_pattern, strip_width
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 
 def test_strip_width_of_a_rotated_rectangle():
     r = np.array([[0, 0], [3, 0], [3, 1], [0, 1]], float)

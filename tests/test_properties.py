@@ -33,6 +33,9 @@ from jaxgeo.geodesic import METHODS
 from jaxgeo.path import EDGE, FACE, VERTEX
 from jaxgeo.projection import param_tolerance
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 geodesic = pytest.importorskip("pygeodesic.geodesic")
 
 # -------------------------------------------------------------------- generators

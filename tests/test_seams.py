@@ -1,9 +1,13 @@
 """Seam-layout optimisation on the twin-peak tent (no rotational symmetry)."""
 
 import numpy as np
+import pytest
 
 import jaxgeo as jg
 from jaxgeo import seams, surfaces
+
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
 
 
 def test_twin_peak_optimisation_fits_the_roll():

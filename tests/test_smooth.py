@@ -30,6 +30,9 @@ from jaxgeo.smooth import (
 )
 from jaxgeo.surfaces import icosphere
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 CAPACITY = 256  # one compiled shape for every path of a mesh
 
 

@@ -14,6 +14,9 @@ from jaxgeo.path import EDGE, VERTEX
 
 from .helpers import face_points, great_circle, position, unit_icosphere
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 MESH = unit_icosphere(4)  # 5,120 faces
 
 

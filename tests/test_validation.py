@@ -11,6 +11,9 @@ from jaxgeo import cli, validation
 from jaxgeo._errors import JaxgeoError
 from jaxgeo.surfaces import catenoid_parameter
 
+# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
+pytestmark = pytest.mark.slow
+
 RES = 3
 #: The paper's sphere claim: the traced arc is within 0.5 % of the great circle.
 PAPER_SPHERE_TOL = 0.005
