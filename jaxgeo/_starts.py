@@ -79,7 +79,7 @@ def vertex_path(
     return jnp.where(j < count, path, -1), count.astype(jnp.int32), ok
 
 
-def _face_pos(mesh: Mesh, face, vertex):
+def face_fan_position(mesh: Mesh, face, vertex):
     """Position of `face` in the fan of its corner `vertex`."""
     corner = jnp.argmax(mesh.faces[face] == vertex)
     return mesh.corner_fan_pos[face, corner]
@@ -121,7 +121,7 @@ def corridor_from_vertices(
         w = path[jnp.minimum(i + 1, path.shape[0] - 1)]
         q = jnp.argmax(mesh.fan_spokes[v] == w)  # spoke to the next vertex
         has_q = jnp.any(mesh.fan_spokes[v] == w)
-        p_end = _face_pos(mesh, end_face, v)
+        p_end = face_fan_position(mesh, end_face, v)
         to_ccw = jnp.where(
             last, p_end, jnp.where(closed, (q - 1) % jnp.maximum(n, 1), q - 1)
         )
@@ -131,7 +131,7 @@ def corridor_from_vertices(
         exit_face = mesh.fan_faces[
             v, jnp.clip(exit_pos, 0, mesh.fan_faces.shape[1] - 1)
         ]
-        nxt = _face_pos(mesh, exit_face, w)
+        nxt = face_fan_position(mesh, exit_face, w)
         return (
             jnp.where(last, p_e, nxt),
             dirs.at[i].set(d),
@@ -142,7 +142,7 @@ def corridor_from_vertices(
 
     m = path.shape[0]
     zeros = jnp.zeros(m, jnp.int32)
-    p0 = _face_pos(mesh, start_face, path[0])
+    p0 = face_fan_position(mesh, start_face, path[0])
     init = (p0, zeros, zeros, zeros, jnp.asarray(True))
     _, dirs, counts, starts, ok = jax.lax.fori_loop(0, count, body, init)
     live = jnp.arange(m) < count

@@ -21,12 +21,12 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 from jaxtyping import ArrayLike
 
-from ._checks import check_arguments, check_batch_options, check_point_batch
+from ._checks import check_batch_options, check_point_batch
 from ._errors import JaxgeoError
-from .geodesic import as_surface_point, solve
+from .geodesic import as_surface_point, checked_method, solve
 from .locate import DEFAULT_MAX_DISTANCE
 from .mesh import Mesh
-from .methods import Method, as_method
+from .methods import Method
 from .normals import Weighting
 from .path import Path, Status
 
@@ -113,17 +113,9 @@ def shortest_paths(
 
     **Returns:** a `Path` whose arrays have a leading batch axis of length N.
     """
-    if not isinstance(mesh, Mesh):
-        raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
-    check_arguments(
-        mesh,
-        candidates or "local",
-        max_points,
-        normals or "uniform",
-        max_distance,
-        throw,
+    m, max_points = checked_method(
+        mesh, method, candidates, max_points, normals, max_distance, throw
     )
-    m = as_method(method, candidates=candidates, normals=normals)
     check_batch_options(chunk_size, shard, progress)
     a, b = check_point_batch("p1", p1), check_point_batch("p2", p2)
     if a.shape != b.shape:

@@ -51,6 +51,25 @@ def solve(
     return method.solve(mesh, start, end, initial, max_points, differentiable)
 
 
+def checked_method(
+    mesh, method, candidates, max_points, normals, max_distance, throw
+) -> tuple[AnyMethod, int]:
+    """The options shared by `shortest_path` and `shortest_paths`, checked: the
+    method object they select and `max_points` as a Python int (a static shape;
+    numpy integers are accepted). `JaxgeoError` names a bad option."""
+    if not isinstance(mesh, Mesh):
+        raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
+    check_arguments(
+        mesh,
+        candidates or "local",
+        max_points,
+        normals or "uniform",
+        max_distance,
+        throw,
+    )
+    return as_method(method, candidates=candidates, normals=normals), int(max_points)
+
+
 @eqx.filter_jit
 def _solve_one(mesh, p1, p2, max_distance, method, max_points, differentiable):
     start, d1 = as_surface_point(mesh, p1)
@@ -100,17 +119,9 @@ def shortest_path(
     **Returns:** a `Path`; its points and length are differentiable with respect to
     `mesh.vertices` and the endpoints.
     """
-    if not isinstance(mesh, Mesh):
-        raise JaxgeoError(f"mesh must be a jaxgeo.Mesh, got {type(mesh).__name__}")
-    check_arguments(
-        mesh,
-        candidates or "local",
-        max_points,
-        normals or "uniform",
-        max_distance,
-        throw,
+    m, max_points = checked_method(
+        mesh, method, candidates, max_points, normals, max_distance, throw
     )
-    m = as_method(method, candidates=candidates, normals=normals)
     concrete = not is_traced((mesh, p1, p2))
     if concrete:
         check_point("p1", p1, mesh)

@@ -44,7 +44,9 @@ class Exact(eqx.Module):
             max_iterations=self.max_iterations,
         )
         status = jnp.where(initial >= 0, initial, res.status).astype(jnp.int32)
-        stats = {k: getattr(res.stats, k) for k in _EXACT_STATS}
+        stats = {
+            f.name: getattr(res.stats, f.name) for f in dataclasses.fields(res.stats)
+        }
         return Path(
             points=res.points,
             kinds=res.kinds,
@@ -56,9 +58,6 @@ class Exact(eqx.Module):
             status=status,
             stats=stats,
         )
-
-
-_EXACT_STATS = ("iterations", "flips", "starts", "starts_converged", "corridor_length")
 
 
 class Laser(eqx.Module):

@@ -143,10 +143,10 @@ def _cholesky_solve(m, rhs):
     `vmap`, fused elementwise operations); also returns the smallest pivot, ≤ 0
     where m is not positive definite to rounding.
 
-    Not `jnp.linalg`: batched LAPACK calls (eigvalsh, solve) in the compiled
-    `shortest_path(method="smooth")`, whose refinement runs JAX inside a
-    `pure_callback`, deadlocked on 2 cores from 384 boundary vertices (catenoid
-    level 5): all threads waiting on a futex."""
+    Not `jnp.linalg`: batched LAPACK calls (eigvalsh, solve) deadlocked on 2 cores
+    from 384 boundary vertices (catenoid level 5) when the smooth method still ran
+    JAX inside a host callback; unrolled, the fit is also fused elementwise work
+    under `vmap`, with no per-lane LAPACK call."""
     n = m.shape[0]
     low = [[None] * n for _ in range(n)]
     pivot = []
