@@ -233,31 +233,34 @@ def funnel(
     def body(s, active):
         sl, i, ap, ai, a_i, lp, li, l_i, rp, ri, r_i, out, m, steps, lx, rx = s
         pl, il, pr, ir = point(sl, lx, rx, i)
-        # right side narrows?
-        r_tight = _cross(rp - ap, pr - ap) >= 0
-        # a side at the apex itself (its vertex is still a portal end) bounds
-        # nothing: the other side cannot cross it
-        r_ok = (ai == ri) | (ai == li) | (_cross(lp - ap, pr - ap) < 0)
-        r_move = r_tight & r_ok
-        r_over = r_tight & ~r_ok  # crosses the left side: left becomes the apex
+        # A side at the apex bounds nothing (right after a restart, or while the
+        # apex's vertex stays a portal end): any point narrows it, and the other
+        # side cannot cross it. Mononen's version skips the crossing test when the
+        # *moving* side is at the apex, which let a point beyond the other side
+        # invert the funnel (5.8 % long on a flat grid). A point on the other
+        # side's ray counts as crossing it (as in Mononen's): the funnel never has
+        # zero width, where rounding could let the sides swap (seen on the
+        # catenoid: a path 5e-4 shorter than the exact one, outside its corridor).
+        r_apex = ir == ai  # the new right point is the apex's vertex itself
+        r_tight = (ri == ai) | r_apex | (_cross(rp - ap, pr - ap) >= 0)
+        r_over = r_tight & ~r_apex & (li != ai) & (_cross(lp - ap, pr - ap) >= 0)
+        r_move = r_tight & ~r_over
         rp2 = jnp.where(r_move, pr, rp)
         ri2 = jnp.where(r_move, ir, ri)
         r_i2 = jnp.where(r_move, i, r_i)
-        # left side narrows? (only when the right did not restart)
-        l_tight = _cross(lp - ap, pl - ap) <= 0
-        l_ok = (ai == li) | (ai == ri2) | (_cross(rp2 - ap, pl - ap) > 0)
-        l_move = ~r_over & l_tight & l_ok
-        l_over = ~r_over & l_tight & ~l_ok
+        # the left side, unless the right restarted the funnel
+        l_apex = il == ai
+        l_tight = ~r_over & ((li == ai) | l_apex | (_cross(lp - ap, pl - ap) <= 0))
+        l_over = l_tight & ~l_apex & (ri2 != ai) & (_cross(rp2 - ap, pl - ap) <= 0)
+        l_move = l_tight & ~l_over
         lp2 = jnp.where(l_move, pl, lp)
         li2 = jnp.where(l_move, il, li)
         l_i2 = jnp.where(l_move, i, l_i)
-        restart = r_over | l_over
-        np_ = jnp.where(r_over, lp2, rp2)  # the new apex
+        restart = r_over | l_over  # the other side becomes the apex
+        np_ = jnp.where(r_over, lp2, rp2)
         ni = jnp.where(r_over, li2, ri2)
         n_i = jnp.where(r_over, l_i2, r_i2)
-        # a restart at the apex itself (its vertex is still a portal end) only
-        # moves on: no new bend
-        bend = active & restart & (ni != ai)
+        bend = active & restart
         out = out.at[jnp.where(bend, m, out.shape[0])].set(ni, mode="drop")
 
         def upd(new, old):

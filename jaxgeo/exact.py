@@ -43,8 +43,8 @@ from jaxtyping import Array, Bool, Float, Int
 
 from . import _sleeve
 from ._numerics import safe_norm
-from ._starts import best_slots, corridor_from_vertices, vertex_path
-from .locate import SurfacePoint
+from ._starts import best_slots, corridor_from_vertices, face_fan_position, vertex_path
+from .locate import SurfacePoint, snap
 from .mesh import Mesh
 from .path import EDGE, FACE, VERTEX, Status
 
@@ -73,6 +73,11 @@ def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
 # ------------------------------------------------------------------- endpoints
 
 
+#: A crossing parameter may lie this far outside [0, 1] (rounding of the unfolding,
+#: ~1e-13 for corridors of a few hundred faces, far below).
+_PORTAL_SLACK = 1e-9
+
+
 def _snap_tol(dtype) -> float:
     """Barycentric coordinates below this are zero (the point is on an edge or a
     vertex): eps^(2/3), 4e-11 in float64, so snapping moves a point by at most
@@ -91,17 +96,10 @@ class _End(eqx.Module):
 
 def _end(mesh: Mesh, sp: SurfacePoint) -> _End:
     b = sp.bary / jnp.sum(sp.bary)
-    small = b <= _snap_tol(b.dtype)
-    b = jnp.where(small, 0.0, b)
-    b = b / jnp.sum(b)
-    n_small = jnp.sum(small)
-    kind = jnp.where(n_small >= 2, VERTEX, jnp.where(n_small == 1, EDGE, FACE))
-    index = jnp.where(
-        kind == VERTEX,
-        mesh.faces[sp.face, jnp.argmax(b)],
-        jnp.where(kind == EDGE, mesh.face_edges[sp.face, jnp.argmax(small)], sp.face),
-    )
-    return _End(sp.face, b, kind.astype(jnp.int32), index.astype(jnp.int32))
+    tol = _snap_tol(b.dtype)
+    kind, index = snap(mesh, SurfacePoint(sp.face, b), tol)
+    b = jnp.where(b <= tol, 0.0, b)
+    return _End(sp.face, b / jnp.sum(b), kind, index)
 
 
 def _contains(mesh: Mesh, end: _End, faces):
@@ -211,7 +209,7 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     fa = corridor[jnp.clip(a, 0, cap - 1)]
     fa1 = corridor[jnp.clip(a + 1, 0, cap - 1)]
     fb = corridor[jnp.clip(b + 1, 0, cap - 1)]
-    pos = jax.vmap(_pos_in_fan, in_axes=(None, 0, 0))
+    pos = jax.vmap(face_fan_position, in_axes=(None, 0, 0))
     p0, p_next, p1 = pos(mesh, fa, v), pos(mesh, fa1, v), pos(mesh, fb, v)
     nv_ = jnp.maximum(nv, 1)
     d = jnp.where((p_next - p0) % nv_ == 1, 1, -1)  # the corridor's direction
@@ -225,11 +223,6 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     chain_start = jax.lax.cummax(jnp.where(flip & ~conflict, q, -1))
     taken = flip & ((q - chain_start) % 2 == 0)
     return taken, v, a, b, p0, -d, count
-
-
-def _pos_in_fan(mesh: Mesh, face, vertex):
-    corner = jnp.argmax(mesh.faces[face] == vertex)
-    return mesh.corner_fan_pos[face, corner]
 
 
 def _apply_flips(mesh: Mesh, corridor, n, taken, v, a, b, p0, d, count):
@@ -310,20 +303,19 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
     """Flip until no wrapped vertex admits a shorter way round, for a lane batch
     (leading axis of every argument but `mesh`, `theta`)."""
     dtype = mesh.vertices.dtype
-    lanes_v = jax.vmap
 
     def body(lane: _Lane) -> _Lane:
         active = ~lane.done
-        sl = lanes_v(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
+        sl = jax.vmap(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
             lane.corridor, lane.n, s, t
         )
         pinned, m, fun_ok = _sleeve.funnel(sl)
-        length = lanes_v(_pinned_length)(sl, pinned, m)
-        taken, v, a, b, p0, d, count = lanes_v(
+        length = jax.vmap(_pinned_length)(sl, pinned, m)
+        taken, v, a, b, p0, d, count = jax.vmap(
             lambda c, sl_, p, m_: _flips(mesh, theta, c, sl_, p, m_, tol)
         )(lane.corridor, sl, pinned, m)
         n_taken = jnp.sum(taken, axis=-1, dtype=jnp.int32)
-        new, new_n, fits = lanes_v(lambda *x: _apply_flips(mesh, *x))(
+        new, new_n, fits = jax.vmap(lambda *x: _apply_flips(mesh, *x))(
             lane.corridor, lane.n, taken, v, a, b, p0, d, count
         )
         new, new_n = _clean(mesh, new, new_n, s, t)
@@ -367,10 +359,9 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
     return eqx.tree_at(lambda x: x.status, lane, status)
 
 
-def _start(mesh, slot, slot_ok, s, t, cap):
-    """A starting corridor from the forest path of `slot` (one lane)."""
-    vs = mesh.faces[s.face, jnp.argmax(s.bary)]
-    vt = mesh.faces[t.face, jnp.argmax(t.bary)]
+def _start(mesh, slot, slot_ok, vs, vt, s, t, cap):
+    """A starting corridor from the forest path of `slot` from vertex vs (of the
+    start's face) to vt (of the end's face); one lane."""
     path, count, path_ok = vertex_path(mesh, slot, vs, vt, cap)
     corridor, n, c_ok = corridor_from_vertices(mesh, path, count, s.face, t.face, cap)
     status0 = jnp.where(
@@ -422,6 +413,9 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
     dq = Q - P
     den = _sleeve._cross(lxy - rxy, dq)
     tt = _sleeve._cross(P - rxy, dq) / jnp.where(den != 0, den, 1.0)
+    # a taut string crosses every portal between its ends (to rounding); one that
+    # does not is a failed solve, never a path
+    inside = ~emit | at_vertex | ((tt > -_PORTAL_SLACK) & (tt < 1 + _PORTAL_SLACK))
     tt = jnp.clip(tt, 0.0, 1.0)
     v = mesh.vertices
     cross3 = (1 - tt)[:, None] * v[sl.right] + tt[:, None] * v[sl.left]
@@ -452,7 +446,7 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
     # the unused tail repeats the end point
     tail = jnp.arange(cap_points) > last
     P3 = jnp.where(tail[:, None], end, P3)
-    return P3, K, E, U, count, length
+    return P3, K, E, U, count, length, jnp.all(inside)
 
 
 def exact_solve(
@@ -499,8 +493,8 @@ def exact_solve(
         return jnp.repeat(x, k, axis=0)
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
-    corridor, n, status0 = jax.vmap(lambda a, b, c, d: _start(smesh, a, b, c, d, cap))(
-        slots.reshape(-1), slot_ok.reshape(-1), s_l, t_l
+    corridor, n, status0 = jax.vmap(lambda *x: _start(smesh, *x, cap))(
+        slots.reshape(-1), slot_ok.reshape(-1), lanes_of(vs), lanes_of(vt), s_l, t_l
     )
     lanes = _refine(smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol)
     lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
@@ -526,7 +520,7 @@ def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):
     smesh = jax.lax.stop_gradient(mesh)
     ss, ts = jax.lax.stop_gradient((s, t))
     p_start, p_end = start.position(mesh), end.position(mesh)
-    P3, K, E, U, count, length = _assemble(
+    P3, K, E, U, count, length, inside = _assemble(
         mesh, corridor, n, s, t, p_start, p_end, max_points
     )
     # a face holding both endpoints: the straight segment is globally shortest
@@ -538,6 +532,9 @@ def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):
     U = jnp.where(direct, 0.0, U)
     count = jnp.where(direct, 2, count)
     length = jnp.where(direct, safe_norm(p_end - p_start), length)
+    status = jnp.where(
+        ~inside & (status == Status.SUCCESS), Status.REFINE_FAILED, status
+    )
     status = jnp.where(direct, Status.SUCCESS, status)
     ok = status == Status.SUCCESS
     status = jnp.where(ok & (count > max_points), Status.MAX_STEPS, status)

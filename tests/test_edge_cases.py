@@ -289,13 +289,13 @@ def test_path_through_vertices_on_a_symmetric_diagonal():
     """The diagonal of the grid runs exactly through vertices (and along the
     diagonal edges of half the cells): crossings at u = 0 or 1 snap to vertices."""
     v = V(FLAT)
-    path = ok(jg.shortest_path(FLAT, v[vid(0, 0)], v[vid(6, 6)]))
+    path = ok(jg.shortest_path(FLAT, v[vid(0, 0)], v[vid(6, 6)], method="laser"))
     assert float(path.length) == pytest.approx(2 * np.sqrt(2), rel=1e-12)
     kinds = np.asarray(path.kinds)[1 : int(path.count) - 1]
     assert np.all(kinds == VERTEX)
     # a chord through the central vertex from two points inside faces
     a, b = np.array([-0.9, -0.8, 0.0]), np.array([0.9, 0.8, 0.0])
-    path = ok(jg.shortest_path(FLAT, a, b))
+    path = ok(jg.shortest_path(FLAT, a, b, method="laser"))
     assert float(path.length) == pytest.approx(np.linalg.norm(b - a), rel=1e-12)
     kinds = np.asarray(path.kinds)[: int(path.count)]
     elems = np.asarray(path.elements)[: int(path.count)]
@@ -401,9 +401,11 @@ def test_identical_endpoints_on_a_closed_mesh():
 def test_out_of_steps_is_a_status_and_raises():
     v = V(SADDLE)
     with pytest.raises(jg.JaxgeoError, match="out of steps"):
-        jg.shortest_path(SADDLE, v[vid(0, 0)], v[vid(6, 6)], max_points=4)
+        jg.shortest_path(
+            SADDLE, v[vid(0, 0)], v[vid(6, 6)], max_points=4, method="laser"
+        )
     path = jg.shortest_path(
-        SADDLE, v[vid(0, 0)], v[vid(6, 6)], max_points=4, throw=False
+        SADDLE, v[vid(0, 0)], v[vid(6, 6)], max_points=4, throw=False, method="laser"
     )
     assert int(path.status) == jg.Status.MAX_STEPS
     assert int(path.count) <= 4 and not bool(path.ok)
@@ -421,8 +423,8 @@ def test_no_crossing_is_a_status_and_raises():
     v = V(mesh)
     a, b = v[vid(0, 0)], v[vid(0, N)]
     with pytest.raises(jg.JaxgeoError, match="no crossing ahead"):
-        jg.shortest_path(mesh, a, b)
-    path = jg.shortest_path(mesh, a, b, throw=False)
+        jg.shortest_path(mesh, a, b, method="laser")
+    path = jg.shortest_path(mesh, a, b, throw=False, method="laser")
     assert int(path.status) == jg.Status.NO_CROSSING
     assert np.all(np.isfinite(np.asarray(path.points)))
 

@@ -221,3 +221,32 @@ def test_method_objects_carry_options():
         jg.shortest_path(mesh, v[0], v[1], method="dijkstra")
     with pytest.raises(jg.JaxgeoError, match="candidates"):
         jg.shortest_path(mesh, v[0], v[1], method=jg.Laser(candidates="some"))
+
+
+def test_straight_segment_through_vertices_on_a_flat_grid():
+    """Regression: a chord through a grid vertex (a degenerate funnel) came out
+    5.8 % long when the funnel skipped the crossing test for the side at its
+    apex. On a flat convex grid the geodesic is the chord."""
+    v, f = surfaces.saddle(n=6)
+    v = np.asarray(v, float).copy()
+    v[:, 2] = 0.0
+    mesh = jg.Mesh(v, f)
+    a = v[2 * 7 + 1]
+    b = 0.5 * (v[5 * 7 + 6] + v[5 * 7 + 5])
+    for k in (1, 2, 4):
+        p = jg.shortest_path(
+            mesh, a, b, method=jg.Exact(max_starts=k), max_points=POINTS
+        )
+        np.testing.assert_allclose(float(p.length), np.linalg.norm(b - a), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_collinear_wall_vertices_on_the_catenoid():
+    """Regression: a pair whose string passes (to rounding) along a row of wall
+    vertices; a zero-width funnel let its sides swap and returned a path 5e-4
+    shorter than MMP, outside its corridor."""
+    mesh = jg.Mesh(*surfaces.catenoid())
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    ref = pg.PyGeodesicAlgorithmExact(v, f).geodesicDistance(1059, 1304)[0]
+    p = jg.shortest_path(mesh, v[1059], v[1304], max_points=POINTS)
+    assert abs(float(p.length) - ref) <= EQUAL * ref
