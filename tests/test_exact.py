@@ -58,6 +58,14 @@ def holed_plate() -> jg.Mesh:
     return jg.Mesh(tm.vertices, tm.faces)
 
 
+def _referenced(path) -> jg.Mesh:
+    """A mesh file without its unreferenced vertices (pygeodesic refuses them)."""
+    m = jg.load_mesh(path)
+    tm = trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.faces), process=False)
+    tm.remove_unreferenced_vertices()
+    return jg.Mesh(tm.vertices, tm.faces)
+
+
 def _compare(mesh: jg.Mesh, n_pairs: int, seed: int) -> np.ndarray:
     """Relative differences (jaxgeo − MMP) / MMP over random vertex pairs, solved
     as one batch."""
