@@ -184,7 +184,6 @@ def _trim(mesh: Mesh, stack, n, s: _End, t: _End):
 def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     """The wedge flips to make: for every pinned point, whether to flip it and
     the complementary fan (vertex, first position, direction, face count)."""
-    cap = corridor.shape[0]
     q = jnp.arange(pinned.shape[0])
     inst = jnp.maximum(pinned, 0)
     xy = _pinned_xy(sleeve, pinned)
@@ -206,14 +205,7 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
         & (run <= nv)
         & (b >= a)
     )
-    fa = corridor[jnp.clip(a, 0, cap - 1)]
-    fa1 = corridor[jnp.clip(a + 1, 0, cap - 1)]
-    fb = corridor[jnp.clip(b + 1, 0, cap - 1)]
-    pos = jax.vmap(face_fan_position, in_axes=(None, 0, 0))
-    p0, p_next, p1 = pos(mesh, fa, v), pos(mesh, fa1, v), pos(mesh, fb, v)
-    nv_ = jnp.maximum(nv, 1)
-    d = jnp.where((p_next - p0) % nv_ == 1, 1, -1)  # the corridor's direction
-    count = ((p0 - p1) * d) % nv_ + 1  # the other way round, both ends included
+    p0, d, count = _other_way(mesh, corridor, v, a, b)
 
     # Fans of consecutive wrapped vertices may share a face (never of others):
     # in every chain of such conflicts take every other flip, the rest wait.
@@ -222,7 +214,82 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     conflict = flip & prev_flip & (a <= prev_b + 1)
     chain_start = jax.lax.cummax(jnp.where(flip & ~conflict, q, -1))
     taken = flip & ((q - chain_start) % 2 == 0)
-    return taken, v, a, b, p0, -d, count
+    return taken, v, a, b, p0, d, count
+
+
+def _other_way(mesh: Mesh, corridor, v, a, b):
+    """For vertices v held by corridor faces a … b + 1 (arrays): the fan the other
+    way round each, from face a to face b + 1 (first position, direction ±1,
+    faces counted with both ends)."""
+    cap = corridor.shape[0]
+    fa = corridor[jnp.clip(a, 0, cap - 1)]
+    fa1 = corridor[jnp.clip(a + 1, 0, cap - 1)]
+    fb = corridor[jnp.clip(b + 1, 0, cap - 1)]
+    pos = jax.vmap(face_fan_position, in_axes=(None, 0, 0))
+    p0, p_next, p1 = pos(mesh, fa, v), pos(mesh, fa1, v), pos(mesh, fb, v)
+    nv = jnp.maximum(mesh.fan_size[v], 1)
+    d = jnp.where((p_next - p0) % nv == 1, 1, -1)  # the corridor's direction
+    return p0, -d, ((p0 - p1) * d) % nv + 1
+
+
+def _detours(mesh: Mesh, theta, corridor, n, s, t, k: int, tol):
+    """k corridors that pass the converged path's nearest walls of positive
+    curvature on their other side (one vertex each). Where every vertex round
+    the path is a cone point several locally shortest paths exist, and starts
+    that all reach the same one cannot tell; a detour starts in the other."""
+    sl = _sleeve_of(mesh, corridor, n, s, t)
+    pinned, m, _ = jax.tree.map(
+        lambda x: x[0], _sleeve.funnel(jax.tree.map(lambda x: x[None], sl))
+    )
+    cap = corridor.shape[0]
+    inst = jnp.arange(cap + 1)
+    v = sl.inst_vertex
+    a, b = sl.inst_first, sl.inst_last
+    # the path segment beside each wall instance, and its distance from it
+    first = jnp.where(
+        pinned == _sleeve.START,
+        -1,
+        jnp.where(
+            (pinned == _sleeve.END) | (jnp.arange(pinned.shape[0]) >= m),
+            n - 1,
+            sl.inst_first[jnp.maximum(pinned, 0)],
+        ),
+    )
+    j = jnp.clip(jnp.searchsorted(first, a, side="right") - 1, 0, pinned.shape[0] - 2)
+    xy = _pinned_xy(sl, pinned)
+    p, q = xy[j], xy[j + 1]
+    w = sl.inst_xy - p
+    seg = q - p
+    u = jnp.clip(
+        jnp.sum(w * seg, -1) / jnp.maximum(jnp.sum(seg * seg, -1), 1e-300), 0, 1
+    )
+    dist = safe_norm(w - u[:, None] * seg)
+    pinned_here = (
+        jnp.zeros(cap + 1, bool)
+        .at[jnp.maximum(pinned, 0)]
+        .set((pinned >= 0) & (jnp.arange(pinned.shape[0]) < m), mode="drop")
+    )
+    run = b - a + 2
+    ok = (
+        (inst <= n)
+        & (b >= a)
+        & mesh.fan_closed[v]
+        & (theta[v] < 2 * jnp.pi - tol)
+        & (run <= mesh.fan_size[v])
+        & ~pinned_here
+    )
+    _, pick = jax.lax.top_k(jnp.where(ok, -dist, -jnp.inf), k)
+    good = ok[pick]
+    p0, d, count = _other_way(mesh, corridor, v[pick], a[pick], b[pick])
+
+    def one(vi, ai, bi, pi, di, ci, gi):
+        new, new_n, fits = _apply_flips(
+            mesh, corridor, n, jnp.array([True]), vi[None], ai[None], bi[None],
+            pi[None], di[None], ci[None],
+        )  # fmt: skip
+        return new, new_n, fits & gi
+
+    return jax.vmap(one)(v[pick], a[pick], b[pick], p0, d, count, good)
 
 
 def _apply_flips(mesh: Mesh, corridor, n, taken, v, a, b, p0, d, count):
@@ -458,6 +525,8 @@ def exact_solve(
     max_starts: int = 4,
     max_iterations: int = 256,
     corridor_capacity: int | None = None,
+    detours: int = 0,
+    detour_rounds: int = 1,
 ) -> ExactResult:
     """The exact polyhedral geodesics from `start[i]` to `end[i]` for a batch of
     endpoint pairs (leading axis B of `start.face`, `start.bary`, …; see the module
@@ -466,7 +535,10 @@ def exact_solve(
 
     **Arguments:** `max_points`: capacity of the result's buffers; `max_starts`:
     landmark starts refined per pair; `max_iterations`: flip rounds at most;
-    `corridor_capacity`: faces a corridor may hold (default `max_points`).
+    `corridor_capacity`: faces a corridor may hold (default `max_points`);
+    `detours`: after the starts, refine this many corridors that pass the best
+    path's nearest cone vertices on their other side (`_detours`), in
+    `detour_rounds` rounds, each from the best path so far.
 
     **Returns:** an `ExactResult` with a leading batch axis.
     """
@@ -498,11 +570,29 @@ def exact_solve(
     )
     lanes = _refine(smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol)
     lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
+    win, found = _shortest(lanes)
+    for _ in range(detour_rounds if detours else 0):
+        # from the best path so far, the other side of its nearest cones
+        corridor, n, fits = jax.vmap(
+            lambda c, m, a, b: _detours(smesh, theta, c, m, a, b, detours, tol)
+        )(win.corridor, win.n, ss, ts)
+        s_d = jax.tree.map(lambda x: jnp.repeat(x, detours, axis=0), ss)
+        t_d = jax.tree.map(lambda x: jnp.repeat(x, detours, axis=0), ts)
+        corridor, n = _clean(smesh, corridor.reshape(-1, cap), n.reshape(-1), s_d, t_d)
+        status0 = jnp.where(fits.reshape(-1), -1, Status.REFINE_FAILED).astype(
+            jnp.int32
+        )
+        more = _refine(
+            smesh, theta, corridor, n, status0, s_d, t_d, max_iterations, tol
+        )
+        more = jax.tree.map(lambda x: x.reshape((n_pairs, detours) + x.shape[1:]), more)
+        both = jax.tree.map(
+            lambda x, y: jnp.stack([x, y], axis=1), win, _shortest(more)[0]
+        )
+        win, found2 = _shortest(both)
+        found = found | found2
+    status = jnp.where(found, Status.SUCCESS, lanes.status[:, 0])
     good = lanes.status == Status.SUCCESS
-    score = jnp.where(good, lanes.length, jnp.inf)
-    best = jnp.argmin(score, axis=1)
-    win = jax.tree.map(lambda x: x[jnp.arange(n_pairs), best], lanes)
-    status = jnp.where(jnp.any(good, axis=1), Status.SUCCESS, lanes.status[:, 0])
     stats = ExactStats(
         iterations=win.iterations,
         flips=win.flips,
@@ -513,6 +603,15 @@ def exact_solve(
     return jax.vmap(lambda *a: _finish(mesh, *a, max_points))(
         start, end, s, t, win.corridor, win.n, status, stats
     )
+
+
+def _shortest(lanes: _Lane):
+    """Per pair (axis 0), the shortest successful lane (axis 1), and whether any
+    succeeded."""
+    good = lanes.status == Status.SUCCESS
+    best = jnp.argmin(jnp.where(good, lanes.length, jnp.inf), axis=1)
+    rows = jnp.arange(good.shape[0])
+    return jax.tree.map(lambda x: x[rows, best], lanes), jnp.any(good, axis=1)
 
 
 def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):

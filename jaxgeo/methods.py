@@ -28,11 +28,15 @@ from .trace import TraceOptions, trace_batch
 
 class Exact(eqx.Module):
     """The exact polyhedral geodesic, computed in JAX (`jaxgeo.exact`): landmark
-    graph paths refined by wedge flips until locally shortest, the shortest of
-    `max_starts` kept. Length and points differentiable. The default method."""
+    graph paths refined by wedge flips until locally shortest, then `detours`
+    corridors round the other side of the best path's nearest cone vertices
+    (`detour_rounds` times); the shortest kept. Length and points differentiable.
+    The default method."""
 
     max_starts: int = 4
     max_iterations: int = 256
+    detours: int = 8
+    detour_rounds: int = 1
 
     def solve(self, mesh, start, end, initial, max_points, differentiable) -> Path:
         res = exact_solve(
@@ -42,6 +46,8 @@ class Exact(eqx.Module):
             max_points=max_points,
             max_starts=self.max_starts,
             max_iterations=self.max_iterations,
+            detours=self.detours,
+            detour_rounds=self.detour_rounds,
         )
         status = jnp.where(initial >= 0, initial, res.status).astype(jnp.int32)
         stats = {

@@ -99,27 +99,26 @@ def test_equals_mmp_on_random_vertex_pairs(make):
     _assert_exact(_compare(make(), 40, seed=0), rate=0.97)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known gap: where every vertex has positive curvature (a coarse sphere) "
-    "several locally shortest paths exist and all landmark starts flip into the "
-    "same one on 15 % of pairs (up to 7e-4 above MMP); starts on the far side of "
-    "nearby vertices are not tried yet",
-)
 def test_equals_mmp_on_a_coarse_sphere():
+    """Every vertex a cone point: several locally shortest paths; without the
+    detours the landmark starts reached the wrong one on 15 % of these pairs."""
     _assert_exact(_compare(unit_icosphere(2), 40, seed=0), rate=0.97)
 
 
-def test_never_below_mmp_nor_far_above_on_a_coarse_sphere():
-    _assert_exact(_compare(unit_icosphere(2), 40, seed=0), rate=0.80)
+TORUS_GAP = pytest.mark.xfail(
+    strict=True,
+    reason="known gap (measured): on the torus some pairs end in the wrong "
+    "homotopy class (up to 15 % above MMP): the landmark starts do not cover "
+    "both ways round the handle",
+)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "make",
     [
-        torus,
-        lambda: jg.load_mesh(package_mesh("pymeshlab/tests/sample_meshes/bone.ply")),
+        pytest.param(torus, marks=TORUS_GAP),
+        lambda: _referenced(package_mesh("pymeshlab/tests/sample_meshes/bone.ply")),
     ],
     ids=["torus", "bone.ply"],
 )
