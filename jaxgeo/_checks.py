@@ -123,18 +123,64 @@ def check_batch_options(
         raise JaxgeoError(f"progress must be callable or None, got {progress!r}")
 
 
+def is_vertex_index(p: Any) -> bool:
+    """Whether an endpoint is an integer scalar (a Python, numpy or JAX integer,
+    traced or not; not a bool): a vertex index."""
+    if isinstance(p, bool | np.bool_):
+        return False
+    if isinstance(p, numbers.Integral):
+        return True
+    dtype, shape = getattr(p, "dtype", None), getattr(p, "shape", None)
+    return dtype is not None and np.dtype(dtype).kind in "iu" and shape == ()
+
+
 def as_endpoint(p: Any, mesh) -> Any:
-    """A 3-D endpoint as a JAX array of the mesh's dtype (a `SurfacePoint` as it
-    is). Lists, tuples and integer arrays would otherwise reach the jit-compiled
-    solver as static Python values or a new dtype, and compile it again for every
-    call."""
-    if hasattr(p, "face") and hasattr(p, "bary"):  # a SurfacePoint
-        return p
-    return jax.numpy.asarray(p, mesh.vertices.dtype)
+    """An endpoint as the compiled solver takes it: a 3-D point as a JAX array of
+    the mesh's dtype; a concrete vertex index as `SurfacePoint.vertex` (so it
+    shares the compiled code of surface points), a traced one as an int32
+    array; a `SurfacePoint` with an int32 face and bary of the mesh's dtype.
+    Lists, tuples, Python and integer scalars would otherwise reach the
+    jit-compiled solver as static values or new dtypes, and compile it again for
+    every call."""
+    jnp = jax.numpy
+    if isinstance(p, SurfacePoint):
+        return SurfacePoint(
+            jnp.asarray(p.face, jnp.int32), jnp.asarray(p.bary, mesh.vertices.dtype)
+        )
+    if is_vertex_index(p):
+        i = jnp.asarray(p, jnp.int32)
+        return i if is_traced(p) else SurfacePoint.vertex(mesh, i)
+    return jnp.asarray(p, mesh.vertices.dtype)
+
+
+def check_vertex_indices(name: str, idx: np.ndarray, mesh) -> None:
+    """Concrete vertex indices (a scalar or `(N,)`) are in range and of vertices
+    that belong to a face."""
+    idx = np.asarray(idx)
+    rows = np.atleast_1d(idx)
+    out = np.flatnonzero((rows < 0) | (rows >= mesh.n_vertices))
+    which = (lambda k: name) if idx.ndim == 0 else (lambda k: f"{name}[{k}]")
+    if out.size:
+        k = int(out[0])
+        more = f" ({out.size} of {rows.size} rows of {name} are)" if idx.ndim else ""
+        raise JaxgeoError(
+            f"{which(k)}: vertex {int(rows[k])} is out of range "
+            f"[0, {mesh.n_vertices}){more}"
+        )
+    unused = np.flatnonzero(np.asarray(mesh.vertex_faces)[rows, 0] < 0)
+    if unused.size:
+        k = int(unused[0])
+        raise JaxgeoError(
+            f"{which(k)}: vertex {int(rows[k])} belongs to no face of the mesh"
+        )
 
 
 def check_point(name: str, p: Any, mesh) -> None:
-    """Eager checks of an endpoint given as a 3-D point or a SurfacePoint."""
+    """Eager checks of an endpoint given as a 3-D point, a vertex index or a
+    SurfacePoint."""
+    if is_vertex_index(p):
+        check_vertex_indices(name, np.asarray(p), mesh)
+        return
     if isinstance(p, SurfacePoint):
         face, bary = np.asarray(p.face), np.asarray(p.bary)
         if face.shape != () or face.dtype.kind not in "iu":
@@ -154,7 +200,10 @@ def check_point(name: str, p: Any, mesh) -> None:
     if a.dtype.kind not in "fiu":
         raise JaxgeoError(f"{name} must be a real 3-D point, got dtype {a.dtype}")
     if a.shape != (3,):
-        raise JaxgeoError(f"{name} must have shape (3,), got {a.shape}")
+        raise JaxgeoError(
+            f"{name} must be a 3-D point, shape (3,), or an integer vertex index, "
+            f"got shape {a.shape} ({a.dtype})"
+        )
     if not np.isfinite(a).all():
         raise JaxgeoError(f"{name} has NaN or infinite coordinates: {a}")
     warn_if_coincident(name, a, mesh)
@@ -228,13 +277,22 @@ def warn_if_coincident(name: str, points: np.ndarray, mesh) -> None:
     )
 
 
-def check_point_batch(name: str, p: Any) -> np.ndarray:
-    """Eager checks of a batch of 3-D endpoints, `(N, 3)`; returns it as numpy."""
+def check_point_batch(name: str, p: Any, mesh=None) -> np.ndarray:
+    """Eager checks of a batch of endpoints: 3-D points `(N, 3)` or vertex indices,
+    an integer array `(N,)` (checked against `mesh` if given); returns it as
+    numpy."""
     a = np.asarray(p)
     if a.dtype.kind not in "fiu":
         raise JaxgeoError(f"{name} must be real 3-D points, got dtype {a.dtype}")
+    if a.ndim == 1 and a.dtype.kind in "iu":
+        if mesh is not None:
+            check_vertex_indices(name, a, mesh)
+        return a
     if a.ndim != 2 or a.shape[1] != 3:
-        raise JaxgeoError(f"{name} must have shape (N, 3), got {a.shape}")
+        raise JaxgeoError(
+            f"{name} must be 3-D points, shape (N, 3), or vertex indices, an "
+            f"integer array of shape (N,); got shape {a.shape} ({a.dtype})"
+        )
     bad = ~np.isfinite(a).all(axis=1)
     if bad.any():
         raise JaxgeoError(

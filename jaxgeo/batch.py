@@ -24,7 +24,7 @@ from jaxtyping import ArrayLike
 from ._checks import check_batch_options, check_point_batch
 from ._errors import JaxgeoError
 from .geodesic import as_surface_point, checked_method, solve
-from .locate import DEFAULT_MAX_DISTANCE
+from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint
 from .mesh import Mesh
 from .methods import Method
 from .normals import Weighting
@@ -35,18 +35,36 @@ _LOCATE_BATCH = 4
 
 
 @eqx.filter_jit
-def _solve_chunk(mesh, p1, p2, max_distance, method, max_points):
+def _solve_chunk(mesh, p1, p2, v1, v2, max_distance, method, max_points):
     # Locating scans every face's bounding sphere once per point. Vmapped over a
     # whole chunk its (chunk, faces) temporaries leave the cache: 256 points on a
     # 20k-face mesh took 123 ms vmapped, 76 ms as `lax.map` in groups of 4.
-    def locate_all(points):
-        return jax.lax.map(
+    # Rows with a vertex index (v ≥ 0, its position in p) start at the vertex:
+    # one compiled function serves points, indices and a mix of both.
+    def locate_all(points, vertex):
+        sp, d = jax.lax.map(
             lambda p: as_surface_point(mesh, p), points, batch_size=_LOCATE_BATCH
         )
+        at = jax.vmap(lambda i: SurfacePoint.vertex(mesh, i))(jnp.maximum(vertex, 0))
+        by_index = vertex >= 0
+        sp = jax.tree.map(
+            lambda a, b: jnp.where(by_index.reshape((-1,) + (1,) * (a.ndim - 1)), a, b),
+            at,
+            sp,
+        )
+        return sp, jnp.where(by_index, 0.0, d)
 
-    (start, d1), (end, d2) = locate_all(p1), locate_all(p2)
+    (start, d1), (end, d2) = locate_all(p1, v1), locate_all(p2, v2)
     # leaves as numpy afterwards: nothing differentiates them, so no replay
     return solve(mesh, start, end, d1, d2, max_distance, method, max_points, False)
+
+
+def _as_rows(mesh: Mesh, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A checked batch of endpoints as (3-D points `(N, 3)`, vertex indices `(N,)`,
+    −1 where the row is a point): vertex rows carry their vertex's position."""
+    if x.ndim == 1:
+        return np.asarray(mesh.vertices)[x], x.astype(np.int32)
+    return x, np.full(x.shape[0], -1, np.int32)
 
 
 def _gather(x) -> np.ndarray:
@@ -98,7 +116,8 @@ def shortest_paths(
     throw: bool = True,
     progress: Callable[[int, int], None] | None = None,
 ) -> Path:
-    """Geodesics between the rows of `p1` and `p2` (each `(N, 3)`).
+    """Geodesics between the rows of `p1` and `p2`, each `(N, 3)` 3-D points or
+    an integer array `(N,)` of vertex indices.
 
     **Arguments:** as `shortest_path`, and
 
@@ -107,8 +126,11 @@ def shortest_paths(
       same `chunk_size` and options do not recompile, whatever N is.
     - `shard`: split each chunk across all devices (`jax.devices()`) when there are
       several.
-    - `throw`: raise `JaxgeoError` naming the failed rows if any path is not
-      complete; otherwise check `paths.status`.
+    - `throw`: raise `JaxgeoError` naming the failed rows, once the whole batch
+      is solved, if any path is not complete (the result is numpy: nothing here
+      is traced, so this is always the eager check). With `throw=False` check
+      `paths.status` (`paths.outcomes`, a list of `Status`); failed rows have
+      NaN `length`.
     - `progress`: called as `progress(done, total)` after each chunk.
 
     **Returns:** a `Path` whose arrays have a leading batch axis of length N.
@@ -117,10 +139,11 @@ def shortest_paths(
         mesh, method, candidates, max_points, normals, max_distance, throw
     )
     check_batch_options(chunk_size, shard, progress)
-    a, b = check_point_batch("p1", p1), check_point_batch("p2", p2)
-    if a.shape != b.shape:
+    a, b = check_point_batch("p1", p1, mesh), check_point_batch("p2", p2, mesh)
+    if a.shape[0] != b.shape[0]:
         raise JaxgeoError(
-            f"p1 and p2 must have the same shape, got {a.shape} and {b.shape}"
+            f"p1 and p2 must have the same shape (or one (N, 3) and one (N,)), got "
+            f"{a.shape} and {b.shape}"
         )
     if chunk_size < 1:
         raise JaxgeoError(f"chunk_size must be positive, got {chunk_size}")
@@ -134,15 +157,21 @@ def shortest_paths(
         n_dev = sharding.mesh.size
         chunk_size = -(-chunk_size // n_dev) * n_dev
     dtype = mesh.vertices.dtype
+    (pa, va), (pb, vb) = _as_rows(mesh, a), _as_rows(mesh, b)
     limit = jnp.asarray(max_distance, dtype)  # an array: no recompile per value
     pieces = []
     for start in range(0, n, chunk_size):
         stop = min(start + chunk_size, n)
         idx = np.minimum(np.arange(start, start + chunk_size), n - 1)  # pad with last
-        ca, cb = jnp.asarray(a[idx], dtype), jnp.asarray(b[idx], dtype)
+        chunk = [
+            jnp.asarray(pa[idx], dtype),
+            jnp.asarray(pb[idx], dtype),
+            jnp.asarray(va[idx]),
+            jnp.asarray(vb[idx]),
+        ]
         if sharding is not None:
-            ca, cb = jax.device_put(ca, sharding), jax.device_put(cb, sharding)
-        paths = _solve_chunk(mesh, ca, cb, limit, m, max_points)
+            chunk = [jax.device_put(x, sharding) for x in chunk]
+        paths = _solve_chunk(mesh, *chunk, limit, m, max_points)
         pieces.append(jax.tree.map(lambda x, k=stop - start: _gather(x)[:k], paths))
         if progress is not None:
             progress(stop, n)

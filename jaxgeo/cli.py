@@ -53,31 +53,14 @@ def _fmt(p: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.6g}" for x in p) + ")"
 
 
-def vertex_point(mesh, i: int):
-    """Mesh vertex `i` as a `SurfacePoint`: a face containing it, with barycentric
-    coordinates one at the vertex's corner and zero at the other two."""
-    import jax.numpy as jnp
-
-    from ._errors import JaxgeoError
-    from .locate import SurfacePoint
-
-    if not 0 <= i < mesh.n_vertices:
-        raise JaxgeoError(f"vertex {i} out of range [0, {mesh.n_vertices})")
-    face = int(mesh.vertex_faces[i, 0])
-    if face < 0:
-        raise JaxgeoError(f"vertex {i} belongs to no face")
-    corner = int(np.flatnonzero(np.asarray(mesh.faces[face]) == i)[0])
-    bary = np.zeros(3, dtype=mesh.vertices.dtype)
-    bary[corner] = 1.0
-    return SurfacePoint(jnp.asarray(face, jnp.int32), jnp.asarray(bary))
-
-
-def _endpoint(mesh, point, vertex, default):
+def _endpoint(mesh, point, vertex, default, option: str):
     """(endpoint for the API, text for the summary) from --from/--to or
-    --from-vertex/--to-vertex."""
+    --from-vertex/--to-vertex (an integer: the API reads it as a vertex index)."""
     if vertex is not None:
-        sp = vertex_point(mesh, vertex)
-        return sp, f"vertex {vertex} {_fmt(np.asarray(mesh.vertices[vertex]))}"
+        from ._checks import check_point
+
+        check_point(option, vertex, mesh)  # JaxgeoError naming the option
+        return vertex, f"vertex {vertex} {_fmt(np.asarray(mesh.vertices[vertex]))}"
     p = np.asarray(point if point is not None else default, dtype=np.float64)
     return p, _fmt(p)
 
@@ -116,8 +99,10 @@ def _cmd_path(args: argparse.Namespace) -> int:
             "--to X Y Z or --to-vertex J"
         )
     mesh, name = _load(args.mesh)
-    p1, text1 = _endpoint(mesh, args.from_, args.from_vertex, EXAMPLE_FROM)
-    p2, text2 = _endpoint(mesh, args.to, args.to_vertex, EXAMPLE_TO)
+    p1, text1 = _endpoint(
+        mesh, args.from_, args.from_vertex, EXAMPLE_FROM, "--from-vertex"
+    )
+    p2, text2 = _endpoint(mesh, args.to, args.to_vertex, EXAMPLE_TO, "--to-vertex")
     path = shortest_path(
         mesh,
         p1,
@@ -176,10 +161,10 @@ def _header_lines(path: str) -> int:
     return 0
 
 
-def read_pairs(path: str, mesh) -> np.ndarray:
-    """Endpoint pairs from a CSV file as an `(N, 6)` array: rows x1,y1,z1,x2,y2,z2,
-    or i,j (vertex indices, replaced by the vertices' coordinates). A header row
-    and `#` comments are allowed."""
+def read_pairs(path: str, mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Endpoint pairs from a CSV file, `(p1, p2)` for `shortest_paths`: rows
+    x1,y1,z1,x2,y2,z2 give two `(N, 3)` arrays, rows i,j (vertex indices) two
+    integer `(N,)` arrays. A header row and `#` comments are allowed."""
     from ._errors import JaxgeoError
 
     try:
@@ -201,14 +186,13 @@ def read_pairs(path: str, mesh) -> np.ndarray:
                 f"{path}: two columns are vertex indices i,j, integers in "
                 f"[0, {mesh.n_vertices})"
             )
-        v = np.asarray(mesh.vertices, dtype=np.float64)
-        return np.concatenate([v[idx[:, 0]], v[idx[:, 1]]], axis=1)
+        return idx[:, 0], idx[:, 1]
     if pairs.shape[1] != 6:
         raise JaxgeoError(
             f"{path}: each row must be x1,y1,z1,x2,y2,z2 (6 numbers) or i,j (2 "
             f"vertex indices), got {pairs.shape[1]} columns"
         )
-    return pairs
+    return pairs[:, :3], pairs[:, 3:]
 
 
 def _points_text(paths, ok: np.ndarray, fmt: str) -> str:
@@ -272,12 +256,12 @@ def _cmd_paths(args: argparse.Namespace) -> int:
                 f"{', '.join('.' + f for f in FORMATS)}"
             )
     mesh, name = _load(args.mesh)
-    pairs = read_pairs(args.pairs, mesh)
-    print(f"{name}: {mesh.n_faces} faces; {len(pairs)} pairs", file=sys.stderr)
+    p1, p2 = read_pairs(args.pairs, mesh)
+    print(f"{name}: {mesh.n_faces} faces; {len(p1)} pairs", file=sys.stderr)
     paths = shortest_paths(
         mesh,
-        pairs[:, :3],
-        pairs[:, 3:],
+        p1,
+        p2,
         method=args.method,
         candidates=args.candidates,
         max_points=args.max_points,
@@ -289,7 +273,7 @@ def _cmd_paths(args: argparse.Namespace) -> int:
     ok = np.asarray(paths.status) == Status.SUCCESS
     table = io.StringIO()
     table.write("row,status,length,points\n")
-    for i in range(len(pairs)):
+    for i in range(len(p1)):
         status = Status(int(paths.status[i])).name.lower()
         if ok[i]:
             table.write(f"{i},{status},{paths.length[i]:.17g},{int(paths.count[i])}\n")
@@ -302,7 +286,7 @@ def _cmd_paths(args: argparse.Namespace) -> int:
     if points_fmt is not None:
         _write(args.points, _points_text(paths, ok, points_fmt))
     failed = np.flatnonzero(~ok)
-    summary = f"{len(pairs) - failed.size} paths complete, {failed.size} failed"
+    summary = f"{len(p1) - failed.size} paths complete, {failed.size} failed"
     if failed.size:
         codes = sorted({Status(int(paths.status[i])).name.lower() for i in failed})
         shown = ", ".join(str(i) for i in failed[:10])

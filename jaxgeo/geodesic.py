@@ -7,11 +7,18 @@ from typing import Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._checks import as_endpoint, check_arguments, check_point, is_traced
+from ._checks import (
+    as_endpoint,
+    check_arguments,
+    check_point,
+    is_traced,
+    is_vertex_index,
+)
 from ._errors import JaxgeoError
-from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint, locate
+from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint, locate, vertex_valid
 from .mesh import Mesh
 from .methods import METHODS, AnyMethod, Method, as_method, initial_status
 from .normals import Weighting
@@ -23,12 +30,19 @@ Endpoint = ArrayLike | SurfacePoint
 
 
 def as_surface_point(mesh: Mesh, p: Endpoint):
-    """A located endpoint and its distance from the surface (0 for a
-    `SurfacePoint`)."""
+    """A located endpoint and its distance from the surface: 0 for a
+    `SurfacePoint` or a vertex index (an integer scalar), NaN for one that is not
+    a point of the mesh (a face or vertex index out of range, a vertex in no
+    face; `solve` gives such a pair `Status.INVALID_ENDPOINT`)."""
+    dtype = mesh.vertices.dtype
     if isinstance(p, SurfacePoint):
-        sp = SurfacePoint(jnp.asarray(p.face), jnp.asarray(p.bary, mesh.vertices.dtype))
-        return sp, jnp.zeros((), mesh.vertices.dtype)
-    return locate(mesh, jnp.asarray(p, mesh.vertices.dtype))
+        sp = SurfacePoint(jnp.asarray(p.face), jnp.asarray(p.bary, dtype))
+        ok = (sp.face >= 0) & (sp.face < mesh.n_faces)
+        return sp, jnp.where(ok, 0.0, jnp.nan).astype(dtype)
+    if is_vertex_index(p):
+        ok = vertex_valid(mesh, p)
+        return SurfacePoint.vertex(mesh, p), jnp.where(ok, 0.0, jnp.nan).astype(dtype)
+    return locate(mesh, jnp.asarray(p, dtype))
 
 
 def solve(
@@ -45,10 +59,34 @@ def solve(
     """The one pipeline: located endpoint pairs (leading batch axis B) → the
     method → `Path` (batched). `shortest_path`, `shortest_paths` and the cutting
     code all come through here."""
+    # a NaN distance marks an endpoint that is no point of the mesh (see
+    # `as_surface_point`); the method still runs on a valid stand-in (face 0)
+    invalid = jnp.isnan(d1) | jnp.isnan(d2)
+    start = _stand_in(start, jnp.isnan(d1))
+    end = _stand_in(end, jnp.isnan(d2))
+    d1, d2 = jnp.nan_to_num(d1), jnp.nan_to_num(d2)
     initial = jax.vmap(initial_status, in_axes=(None, 0, 0, 0, 0, None))(
         mesh, start, end, d1, d2, max_distance
     )
-    return method.solve(mesh, start, end, initial, max_points, differentiable)
+    initial = jnp.where(invalid, Status.INVALID_ENDPOINT, initial).astype(jnp.int32)
+    path = method.solve(mesh, start, end, initial, max_points, differentiable)
+    # A failed path has no length: NaN, never a number an optimiser could
+    # minimise. `where` passes a zero cotangent to the failed length, so its
+    # gradient is zero and `jnp.where(path.ok, path.length, 0.0)` masks it.
+    failed = path.status != Status.SUCCESS
+    return eqx.tree_at(
+        lambda p: p.length, path, jnp.where(failed, jnp.nan, path.length)
+    )
+
+
+def _stand_in(sp: SurfacePoint, bad) -> SurfacePoint:
+    """`sp`, with the centroid of face 0 in the rows where it is not a point of
+    the mesh (so that no method indexes out of range or meets NaN)."""
+    third = jnp.full((3,), 1 / 3, sp.bary.dtype)
+    return SurfacePoint(
+        jnp.where(bad, 0, sp.face).astype(sp.face.dtype),
+        jnp.where(bad[:, None], third, sp.bary),
+    )
 
 
 def checked_method(
@@ -97,7 +135,8 @@ def shortest_path(
 
     - `mesh`: a `Mesh`.
     - `p1`, `p2`: endpoints, each a 3-D point near the surface (it is moved to the
-      nearest point of the mesh) or a `SurfacePoint` (face, barycentric).
+      nearest point of the mesh), an integer (a vertex index: the same as
+      `SurfacePoint.vertex(mesh, i)`) or a `SurfacePoint` (face, barycentric).
     - `method`: `"exact"` (the default; `jaxgeo.Exact`), the exact polyhedral
       geodesic, computed in JAX: graph paths through landmarks straightened and
       flipped round vertices until locally shortest, the shortest of several kept
@@ -113,8 +152,11 @@ def shortest_path(
       (laser and smooth; shorthand for the method's `normals`).
     - `max_distance`: largest distance of a 3-D endpoint from the surface, in mean
       edge lengths.
-    - `throw`: raise `JaxgeoError` when the path is not complete. Only acts on
-      concrete inputs; under `jax.jit`/`jax.vmap` check `Path.status` instead.
+    - `throw`: raise when the path is not complete: `JaxgeoError` on concrete
+      inputs; under `jax.jit`/`jax.vmap` the compiled program raises when it runs
+      (`equinox.error_if`, as optimistix does: a `RuntimeError` with the same
+      message). With `throw=False` check `Path.status`; a failed path's `length`
+      is NaN.
 
     **Returns:** a `Path`; its points and length are differentiable with respect to
     `mesh.vertices` and the endpoints.
@@ -137,18 +179,47 @@ def shortest_path(
         max_points,
         not concrete,
     )
-    if throw and concrete:
-        status = Status(int(path.status))
+    if throw:
+        known = _known(path.status)
+        if known is None:  # traced: the check runs with the program
+            return _error_if_failed(path)
+        status = Status(int(known))
         if status != Status.SUCCESS:
             detail = ""
-            if status == Status.FAR_FROM_SURFACE:
+            if status == Status.FAR_FROM_SURFACE and _known(dist) is not None:
                 limit = max_distance * float(mesh.mean_edge_length)
                 detail = (
                     f": distances {float(dist[0]):.3g} (p1) and {float(dist[1]):.3g} "
                     f"(p2), limit {limit:.3g} ({max_distance} mean edge lengths)"
                 )
-            raise JaxgeoError(f"no path from p1 to p2: {status.message}{detail}")
+            raise JaxgeoError(f"{_MESSAGES[status]}{detail}")
     return path
+
+
+#: The error of a failed path, by `Status` value.
+_MESSAGES = tuple(f"no path from p1 to p2: {s.message}" for s in Status)
+
+
+def _known(x) -> np.ndarray | None:
+    """`x` as numpy if its value is known now (concrete input, or an integer
+    under an eager `jax.grad`), None when it is traced (under `jax.jit`,
+    `jax.vmap`; a float under `jax.grad`)."""
+    try:
+        return np.asarray(x)
+    except jax.errors.JAXTypeError:
+        return None
+
+
+def _error_if_failed(path: Path) -> Path:
+    """`path`, checked when the compiled program runs: an error with the status's
+    message if it failed (as optimistix's `throw=True`: `eqx.branched_error_if`;
+    under `jax.vmap`, if any row failed, with the message of the highest status
+    code among them). Transparent to `jax.grad` and `jax.jvp`. The
+    `EQX_ON_ERROR` environment variable chooses what an error does (`raise`, the
+    default; `nan`; `breakpoint`)."""
+    return eqx.branched_error_if(
+        path, path.status != Status.SUCCESS, path.status, _MESSAGES
+    )
 
 
 def path_length(mesh: Mesh, p1: Endpoint, p2: Endpoint, **kwargs) -> Float[Array, ""]:

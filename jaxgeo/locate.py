@@ -6,7 +6,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .mesh import Mesh
 
@@ -30,6 +30,29 @@ class SurfacePoint(eqx.Module):
 
     def position(self, mesh: Mesh) -> Float[Array, "3"]:
         return self.bary @ mesh.vertices[mesh.faces[self.face]]
+
+    @classmethod
+    def vertex(cls, mesh: Mesh, i: Int[ArrayLike, ""]) -> SurfacePoint:
+        """Mesh vertex `i` as a point of the first face around it, barycentric
+        coordinates one at its corner and zero at the other two (how
+        `shortest_path` reads an integer endpoint). Works on a traced `i`; an
+        index that is out of range or of a vertex in no face gives face 0 with
+        NaN coordinates (`vertex_valid` tells; `shortest_path` checks concrete
+        indices and raises `JaxgeoError`)."""
+        i = jnp.asarray(i)
+        ok = vertex_valid(mesh, i)
+        face = jnp.where(ok, mesh.vertex_faces[jnp.where(ok, i, 0), 0], 0)
+        corner = jnp.argmax(mesh.faces[face] == i)
+        bary = jax.nn.one_hot(corner, 3, dtype=mesh.vertices.dtype)
+        return cls(face.astype(jnp.int32), jnp.where(ok, bary, jnp.nan))
+
+
+def vertex_valid(mesh: Mesh, i: Int[ArrayLike, "*B"]) -> Bool[Array, "*B"]:
+    """Whether `i` indexes a vertex of `mesh` that belongs to a face (a vertex no
+    face references has no point of the surface)."""
+    i = jnp.asarray(i)
+    inside = (i >= 0) & (i < mesh.n_vertices)
+    return inside & (mesh.vertex_faces[jnp.where(inside, i, 0), 0] >= 0)
 
 
 def _closest_on_triangle(p, a, b, c):

@@ -31,6 +31,10 @@ class Status(enum.IntEnum):
     DIFFERENT_COMPONENTS = 4
     #: The exact refinement could not complete (see `jaxgeo.exact`).
     REFINE_FAILED = 5
+    #: An endpoint is no point of the mesh: a vertex or face index out of range,
+    #: or a vertex that no face references (checked eagerly on concrete input;
+    #: this code is what a traced index gets).
+    INVALID_ENDPOINT = 6
 
     @property
     def message(self) -> str:
@@ -50,6 +54,8 @@ _MESSAGES = {
     "components of the mesh",
     Status.REFINE_FAILED: "the exact method did not converge (no start reached a "
     "locally shortest path within max_iterations flip rounds)",
+    Status.INVALID_ENDPOINT: "an endpoint is not a point of the mesh (a vertex or "
+    "face index out of range, or a vertex in no face)",
 }
 
 #: Kinds of path point, as in `Path.kinds`.
@@ -72,7 +78,10 @@ class Path(eqx.Module):
       (point = (1 − u)·V[edges[e, 0]] + u·V[edges[e, 1]]); 0 otherwise.
     - `branch`: `(M,)` True where the step to this point had several valid
       crossings ahead: a branch point in the sense of the paper's section 6.
-    - `count`, `length`, `status` (a `Status` code).
+    - `count`; `length`, NaN when the path failed (never a number an optimiser
+      could minimise; its gradient there is zero); `status`, a `Status` code as
+      an integer array (`Status(int(path.status))`, or `outcome` /
+      `outcomes`, reads it).
     - `stats`: the method's diagnostics, a dict of integer arrays (as optimistix's
       `Solution.stats`): for `"exact"` the flip rounds (`iterations`) and `flips`
       of the winning start, `starts` refined and `starts_converged`, and the final
@@ -123,10 +132,18 @@ class Path(eqx.Module):
         `jax.jit` compare `path.status == Status.SUCCESS`."""
         if _batch_size(self) is not None:
             raise JaxgeoError(
-                "outcome is for a single path; for a batch use "
-                "[p.outcome for p in paths] or paths.status"
+                "outcome is for a single path; for a batch use paths.outcomes "
+                "(a list of Status) or paths.status"
             )
         return Status(_concrete_int(self.status, "outcome"))
+
+    @property
+    def outcomes(self) -> list[Status]:
+        """How every row of a batch ended, a list of `Status` (a single path gives
+        a list of one)."""
+        if _batch_size(self) is None:
+            return [self.outcome]
+        return [Status(_concrete_int(s, "outcomes")) for s in self.status]
 
     def __bool__(self) -> bool:
         # without this, `if path:` would call __len__ and fail on a single path

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 import jaxgeo as jg
-from jaxgeo.cli import build_parser, main, vertex_point
+from jaxgeo.cli import build_parser, main
 
 from .helpers import unit_icosphere
 
@@ -73,15 +73,10 @@ def test_vertex_endpoints_give_the_path_between_the_vertices(sphere_file, capsys
     assert by_index["length"] == pytest.approx(by_point["length"], rel=1e-12)
 
 
-def test_vertex_point_is_a_one_hot_point_of_a_face_around_the_vertex():
-    mesh = unit_icosphere(2)
-    for i in (0, 41, mesh.n_vertices - 1):
-        sp = vertex_point(mesh, i)
-        assert i in np.asarray(mesh.faces[sp.face])
-        assert sorted(np.asarray(sp.bary).tolist()) == [0.0, 0.0, 1.0]
-        np.testing.assert_array_equal(sp.position(mesh), mesh.vertices[i])
-    with pytest.raises(jg.JaxgeoError, match="vertex -1 out of range"):
-        vertex_point(mesh, -1)
+def test_vertex_out_of_range_is_a_usage_error_naming_the_option(sphere_file, capsys):
+    argv = ["path", str(sphere_file), "--from-vertex", "0", "--to-vertex", "162"]
+    assert main(argv) == 2  # the 320-face icosphere has 162 vertices
+    assert "--to-vertex: vertex 162 is out of range [0, 162)" in capsys.readouterr().err
 
 
 def test_far_point_is_a_clear_error(sphere_file, capsys):

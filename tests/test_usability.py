@@ -13,6 +13,7 @@ import pytest
 import jaxgeo as jg
 from jaxgeo import surfaces
 from jaxgeo.data import EXAMPLES
+from jaxgeo.locate import vertex_valid
 
 from .helpers import unit_icosphere
 
@@ -190,3 +191,104 @@ def test_float32_note_names_the_cause_only_in_float32():
     note = float32_note(np.float32)
     assert "float32" in note and "jax_enable_x64" in note
     assert float32_note(np.float64) == ""
+
+
+# ------------------------------------------------------- endpoints by vertex index
+
+
+def test_integer_endpoints_are_vertex_indices():
+    mesh = unit_icosphere(2)
+    v = np.asarray(mesh.vertices)
+    path = jg.shortest_path(mesh, 0, 100)
+    # a vertex index is SurfacePoint.vertex: the same compiled solve, bit for bit
+    sp = jg.shortest_path(
+        mesh, jg.SurfacePoint.vertex(mesh, 0), jg.SurfacePoint.vertex(mesh, 100)
+    )
+    assert float(path.length) == float(sp.length)
+    line = path.polyline()
+    np.testing.assert_array_equal(line[0], v[0])  # exactly at the vertices
+    np.testing.assert_array_equal(line[-1], v[100])
+    # numpy and JAX integer scalars too; the 3-D points of the same vertices give
+    # the same path, to the rounding of locating them (1e-12 of the unit sphere)
+    same = jg.shortest_path(mesh, np.int64(0), jax.numpy.int32(100))
+    assert float(same.length) == float(path.length)
+    by_point = jg.shortest_path(mesh, v[0], v[100])
+    assert float(by_point.length) == pytest.approx(float(path.length), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "p1, p2, message",
+    [
+        (0, 162, r"p2: vertex 162 is out of range \[0, 162\)"),
+        (-1, 5, r"p1: vertex -1 is out of range"),
+        (True, 5, "p1 must be a real 3-D point, got dtype bool"),  # not an index
+        (np.array([0]), 5, r"3-D point, shape \(3,\), or an integer vertex index"),
+    ],
+)
+def test_bad_vertex_indices_name_the_endpoint(p1, p2, message):
+    with pytest.raises(jg.JaxgeoError, match=message):
+        jg.shortest_path(unit_icosphere(2), p1, p2)
+
+
+def test_surface_point_vertex_works_on_traced_indices():
+    mesh = unit_icosphere(2)
+    faces = np.asarray(mesh.faces)
+    at = jax.jit(lambda i: jg.SurfacePoint.vertex(mesh, i))
+    for i in (0, 41, mesh.n_vertices - 1):
+        for sp in (jg.SurfacePoint.vertex(mesh, i), at(i)):
+            assert i in faces[int(sp.face)]
+            assert sorted(np.asarray(sp.bary).tolist()) == [0.0, 0.0, 1.0]
+            np.testing.assert_array_equal(sp.position(mesh), mesh.vertices[i])
+    # no vertex: not a point of the mesh (NaN coordinates, vertex_valid False)
+    for i in (-1, mesh.n_vertices):
+        assert np.isnan(np.asarray(at(i).bary)).all()
+    # a vertex that no face references
+    v, f = np.asarray(mesh.vertices), faces
+    loose = jg.Mesh(np.vstack([v, [[0.0, 0.0, 3.0]]]), f)
+    np.testing.assert_array_equal(
+        vertex_valid(loose, np.array([0, 162, 163])), [True, False, False]
+    )
+    with pytest.raises(jg.JaxgeoError, match="p1: vertex 162 belongs to no face"):
+        jg.shortest_path(loose, 162, 0)
+
+
+def test_batches_of_vertex_indices(batch):
+    mesh = batch[0]
+    v = np.asarray(mesh.vertices)
+    i, j = np.array([0, 1, 7]), np.array([5, 100, 7])
+    paths = jg.shortest_paths(mesh, i, j, chunk_size=4)
+    for k in range(3):
+        single = jg.shortest_path(mesh, int(i[k]), int(j[k]))
+        # the batched solve equals the single one to rounding (1e-12 of the size)
+        np.testing.assert_allclose(
+            paths[k].polyline(), single.polyline(), rtol=0, atol=1e-12
+        )
+        np.testing.assert_array_equal(paths[k].polyline()[0], v[i[k]])
+    assert float(paths.length[2]) == 0.0  # from a vertex to itself
+    # one side by index, the other by 3-D point: one (N,) and one (N, 3)
+    mixed = jg.shortest_paths(mesh, i, v[j], chunk_size=4)
+    np.testing.assert_allclose(mixed.length, paths.length, rtol=1e-12, atol=1e-15)
+    with pytest.raises(jg.JaxgeoError, match=r"p2\[1\]: vertex 500 is out of range"):
+        jg.shortest_paths(mesh, i, np.array([5, 500, 7]))
+    with pytest.raises(jg.JaxgeoError, match="same shape"):
+        jg.shortest_paths(mesh, i, j[:2])
+
+
+# ------------------------------------------------------- failures, status by row
+
+
+def test_failed_rows_have_nan_length_and_readable_outcomes(batch):
+    mesh, p, _ = batch
+    far = p[:, 0].copy()
+    far[1] *= 5  # 4 radii off the unit sphere
+    paths = jg.shortest_paths(mesh, far, p[:, 1], chunk_size=4, throw=False)
+    ok, bad = jg.Status.SUCCESS, jg.Status.FAR_FROM_SURFACE
+    assert paths.outcomes == [ok, bad, ok]
+    assert [jg.Status(int(s)) for s in paths.status] == paths.outcomes
+    assert np.isnan(paths.length[1]) and np.isfinite(paths.length[[0, 2]]).all()
+    assert paths.outcomes[1].name == "FAR_FROM_SURFACE"
+    with pytest.raises(jg.JaxgeoError, match=r"1 of 3 paths failed .* rows \[1\]"):
+        jg.shortest_paths(mesh, far, p[:, 1], chunk_size=4)
+    one = jg.shortest_path(mesh, far[1], p[1, 1], throw=False)
+    assert np.isnan(float(one.length)) and one.outcomes == [bad]
+    assert jg.Status(int(one.status)) is one.outcome is bad
