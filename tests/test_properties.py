@@ -163,10 +163,13 @@ def check_path(mesh: jg.Mesh, a, b, path: jg.Path, exact: float | None) -> None:
     """The invariants of a path from `a` to `b` (3-D points on the mesh)."""
     status = int(path.status)
     assert status in {s.value for s in jg.Status}, f"undocumented status {status}"
-    for leaf in (path.points, path.params, path.length):
+    for leaf in (path.points, path.params):
         assert np.all(np.isfinite(np.asarray(leaf))), "NaN or inf in the path"
     if status != jg.Status.SUCCESS:
+        # a failed path has no length: NaN, never a number
+        assert np.isnan(float(path.length)), "a failed path with a length"
         return
+    assert np.isfinite(float(path.length)), "NaN or inf length"
     dtype = np.asarray(mesh.vertices).dtype
     # Distances are relative to the mesh scale; float32 keeps ~1e-6 of it.
     scale = float(mesh.mean_edge_length)
