@@ -3,6 +3,8 @@
 transparent to `jax.grad`; with `throw=False` a failed length is NaN and its
 gradient zero."""
 
+import re
+
 import jax
 import jax.extend
 import jax.numpy as jnp
@@ -10,6 +12,7 @@ import numpy as np
 import pytest
 
 import jaxgeo as jg
+from jaxgeo.geodesic import _error_if_failed
 
 from .helpers import face_points, position, unit_icosphere
 
@@ -29,6 +32,42 @@ def _length(a, b, **kw):
     return jg.path_length(MESH, a, b, **kw)
 
 
+def _small_path(status, length=1.0) -> jg.Path:
+    """A two-point `Path` with the given status (no solve: cheap to compile)."""
+    return jg.Path(
+        points=jnp.zeros((2, 3)),
+        kinds=jnp.zeros(2, int),
+        elements=jnp.zeros(2, int),
+        params=jnp.zeros(2),
+        branch=jnp.zeros(2, bool),
+        count=jnp.asarray(2),
+        length=jnp.asarray(length),
+        status=jnp.asarray(status, jnp.int32),
+    )
+
+
+def test_the_error_branch_raises_the_status_message_under_jit_and_vmap():
+    """The check `shortest_path(..., throw=True)` adds to a traced path, on small
+    paths (the solver's own compile is in the slow tests below)."""
+    check = jax.jit(lambda s, x: _error_if_failed(_small_path(s, x)).length)
+    assert float(check(0, 2.5)) == 2.5  # a complete path passes unchanged
+    # and so does its derivative (error_if is the identity for AD)
+    assert float(jax.jit(jax.grad(check, argnums=1))(0, 2.5)) == 1.0
+    for status in jg.Status:
+        if status != jg.Status.SUCCESS:
+            message = re.escape(f"no path from p1 to p2: {status.message}")
+            with pytest.raises(Exception, match=message):
+                check(int(status), 1.0)
+    rows = jax.jit(jax.vmap(check))
+    ok = rows(jnp.array([0, 0]), jnp.array([1.0, 2.0]))
+    np.testing.assert_array_equal(ok, [1.0, 2.0])
+    # one failed row fails the batch, with the message of the highest code
+    far, refine = jg.Status.FAR_FROM_SURFACE, jg.Status.REFINE_FAILED
+    with pytest.raises(Exception, match=re.escape(refine.message)):
+        rows(jnp.array([0, far, refine]), jnp.ones(3))
+
+
+@pytest.mark.slow  # compiles the solver under jax.jit
 def test_throw_raises_under_jit_with_the_status_message():
     q = _points(2, 0)
     f = jax.jit(_length)  # throw=True, the default
