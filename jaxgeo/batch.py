@@ -135,6 +135,7 @@ def shortest_paths(
         chunk_size = -(-chunk_size // n_dev) * n_dev
     dtype = mesh.vertices.dtype
     limit = jnp.asarray(max_distance, dtype)  # an array: no recompile per value
+    padded = mesh.padded()  # padded to its size class: compiled once per class
     pieces = []
     for start in range(0, n, chunk_size):
         stop = min(start + chunk_size, n)
@@ -142,7 +143,7 @@ def shortest_paths(
         ca, cb = jnp.asarray(a[idx], dtype), jnp.asarray(b[idx], dtype)
         if sharding is not None:
             ca, cb = jax.device_put(ca, sharding), jax.device_put(cb, sharding)
-        paths = _solve_chunk(mesh, ca, cb, limit, m, max_points)
+        paths = _solve_chunk(padded, ca, cb, limit, m, max_points)
         pieces.append(jax.tree.map(lambda x, k=stop - start: _gather(x)[:k], paths))
         if progress is not None:
             progress(stop, n)

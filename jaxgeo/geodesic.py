@@ -128,7 +128,7 @@ def shortest_path(
         check_point("p2", p2, mesh)
     p1, p2 = as_endpoint(p1, mesh), as_endpoint(p2, mesh)
     path, dist = _solve_one(
-        mesh,
+        mesh.padded(),  # padded to its size class: compiled once per class
         p1,
         p2,
         # an array, not a static float: a new value must not recompile
