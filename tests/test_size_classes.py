@@ -150,6 +150,23 @@ def test_a_second_mesh_of_a_class_does_not_compile(caplog):
     ) == sizes
 
 
+def test_a_traced_mesh_is_padded_inside_the_trace():
+    """A mesh that is itself an argument of the user's `jax.jit` (as in
+    `jaxgeo.seams`) is padded with jnp inside the trace: the solver sees the
+    class's shapes. Traced only (no compile)."""
+    mesh = small_torus()
+    v = np.asarray(mesh.vertices)
+    jaxpr = jax.make_jaxpr(lambda m: jg.path_length(m, v[0], v[40], max_points=POINTS))(
+        mesh
+    )
+    c = mesh.size_class
+    solver = [e for e in jaxpr.jaxpr.eqns if "_solve_one" in str(e.params.get("name"))]
+    assert len(solver) == 1
+    shapes = {tuple(x.aval.shape) for x in solver[0].invars}
+    assert (c.vertices, 3) in shapes and (c.faces, 3) in shapes
+    assert (mesh.n_vertices, 3) not in shapes and (mesh.n_faces, 3) not in shapes
+
+
 def _both(mesh, method, pairs):
     """The paths of vertex `pairs` on the padded mesh (the public API) and on the
     real mesh (the jitted solver handed the unpadded arrays). test_exact's
