@@ -22,11 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-#: Gauss–Legendre nodes and weights on [0, 1], by number of points.
+#: Gauss–Legendre nodes and weights on [0, 1], by number of points. numpy, not
+#: jnp: this module is first imported inside the jitted solver (`Smooth.solve`
+#: imports `jaxgeo.smooth` lazily), where a jnp constant made at import time
+#: would be a tracer of that trace, leaked into every later call.
 _GAUSS = {
     n: (
-        jnp.asarray(0.5 * (np.polynomial.legendre.leggauss(n)[0] + 1.0)),
-        jnp.asarray(0.5 * np.polynomial.legendre.leggauss(n)[1]),
+        0.5 * (np.polynomial.legendre.leggauss(n)[0] + 1.0),
+        0.5 * np.polynomial.legendre.leggauss(n)[1],
     )
     for n in (2, 3, 4, 5, 6, 8)
 }

@@ -159,6 +159,7 @@ def shortest_paths(
     dtype = mesh.vertices.dtype
     (pa, va), (pb, vb) = _as_rows(mesh, a), _as_rows(mesh, b)
     limit = jnp.asarray(max_distance, dtype)  # an array: no recompile per value
+    padded = mesh.padded()  # padded to its size class: compiled once per class
     pieces = []
     for start in range(0, n, chunk_size):
         stop = min(start + chunk_size, n)
@@ -171,7 +172,7 @@ def shortest_paths(
         ]
         if sharding is not None:
             chunk = [jax.device_put(x, sharding) for x in chunk]
-        paths = _solve_chunk(mesh, *chunk, limit, m, max_points)
+        paths = _solve_chunk(padded, *chunk, limit, m, max_points)
         pieces.append(jax.tree.map(lambda x, k=stop - start: _gather(x)[:k], paths))
         if progress is not None:
             progress(stop, n)

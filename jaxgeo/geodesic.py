@@ -37,7 +37,9 @@ def as_surface_point(mesh: Mesh, p: Endpoint):
     dtype = mesh.vertices.dtype
     if isinstance(p, SurfacePoint):
         sp = SurfacePoint(jnp.asarray(p.face), jnp.asarray(p.bary, dtype))
-        ok = (sp.face >= 0) & (sp.face < mesh.n_faces)
+        inside = (sp.face >= 0) & (sp.face < mesh.n_faces)
+        # a padded mesh's filler faces belong to no component (`jaxgeo._padding`)
+        ok = inside & (mesh.face_component[jnp.where(inside, sp.face, 0)] >= 0)
         return sp, jnp.where(ok, 0.0, jnp.nan).astype(dtype)
     if is_vertex_index(p):
         ok = vertex_valid(mesh, p)
@@ -170,7 +172,7 @@ def shortest_path(
         check_point("p2", p2, mesh)
     p1, p2 = as_endpoint(p1, mesh), as_endpoint(p2, mesh)
     path, dist = _solve_one(
-        mesh,
+        mesh.padded(),  # padded to its size class: compiled once per class
         p1,
         p2,
         # an array, not a static float: a new value must not recompile

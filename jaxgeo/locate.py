@@ -111,9 +111,11 @@ _BLOCK_FACES = 32
 _BLOCKS = 16
 
 
-def _nearest_of(point, tri, faces):
+def _nearest_of(point, tri, faces, real=None):
     """The nearest of the triangles `tri[faces]`: `(face, bary, squared distance)`,
-    ties to the lowest face id (as a brute-force argmin over all faces)."""
+    ties to the lowest face id (as a brute-force argmin over all faces). Faces
+    not `real` (a size class's padding; `(F,)` mask, default all) are infinitely
+    far."""
     t = tri[faces]
     bary = jax.vmap(_closest_on_triangle, in_axes=(None, 0, 0, 0))(
         point, t[:, 0], t[:, 1], t[:, 2]
@@ -124,7 +126,8 @@ def _nearest_of(point, tri, faces):
     # A NaN distance (a NaN vertex, e.g. from `Mesh.with_vertices`, or a NaN point)
     # must never win the argmin (jnp.argmin returns the first NaN): it counts as
     # infinitely far, so a NaN point is FAR_FROM_SURFACE, not a point of face 0.
-    dist2 = jnp.where(jnp.isnan(dist2), jnp.inf, dist2)
+    padding = jnp.zeros(faces.shape, bool) if real is None else ~real[faces]
+    dist2 = jnp.where(jnp.isnan(dist2) | padding, jnp.inf, dist2)
     tied = dist2 == jnp.min(dist2)
     k = jnp.argmin(jnp.where(tied, faces, jnp.iinfo(faces.dtype).max))
     return faces[k], bary[k], dist2[k]
@@ -141,22 +144,25 @@ def locate(
     first distance d; a face whose centroid is farther than d + r cannot be
     nearer, so the exact nearest point is computed only on the faces within reach
     (when they span more than `_BLOCKS` blocks, e.g. for a point far from the surface,
-    on all faces). Returns `(SurfacePoint, distance)`; the caller decides whether
-    the distance is too far (see `shortest_path`).
+    on all faces). Padded faces (`face_component` −1, see `Mesh.padded`) are
+    never chosen: the mask is data, so meshes of one size class share the
+    compiled search. Returns `(SurfacePoint, distance)`; the caller decides
+    whether the distance is too far (see `shortest_path`).
     """
     tri = mesh.vertices[mesh.faces]  # (F, 3, 3)
-    face = _nearest_face(jax.lax.stop_gradient(point), jax.lax.stop_gradient(tri))
+    real = mesh.face_component >= 0
+    face = _nearest_face(jax.lax.stop_gradient(point), jax.lax.stop_gradient(tri), real)
     # The search is a discrete choice; the answer is differentiable in the point
     # and the vertices through the nearest point of the chosen face.
-    _, bary, dist2 = _nearest_of(point, tri, face[None])
+    _, bary, dist2 = _nearest_of(point, tri, face[None], real)
     return SurfacePoint(face, bary), jnp.sqrt(dist2)
 
 
-def _nearest_face(point, tri) -> Int[Array, ""]:
+def _nearest_face(point, tri, real) -> Int[Array, ""]:
     n = tri.shape[0]
     all_faces = jnp.arange(n, dtype=jnp.int32)
     if n <= _BLOCK_FACES * _BLOCKS:
-        return _nearest_of(point, tri, all_faces)[0]
+        return _nearest_of(point, tri, all_faces, real)[0]
     centre = jnp.mean(tri, axis=1)
     radius = jnp.max(jnp.linalg.norm(tri - centre[:, None], axis=-1), axis=1)
     # |p − c|² expanded: under vmap the p·c term is one matrix product. Its
@@ -164,9 +170,9 @@ def _nearest_face(point, tri) -> Int[Array, ""]:
     cc = jnp.sum(centre * centre, axis=1)
     pp = jnp.dot(point, point)
     d2c = jnp.maximum(pp - 2 * (centre @ point) + cc, 0.0)
-    d2c = jnp.where(jnp.isnan(d2c), jnp.inf, d2c)
+    d2c = jnp.where(jnp.isnan(d2c) | ~real, jnp.inf, d2c)
     first = jnp.argmin(d2c).astype(jnp.int32)
-    _, _, d2_first = _nearest_of(point, tri, first[None])
+    _, _, d2_first = _nearest_of(point, tri, first[None], real)
     reach = jnp.sqrt(d2_first) + radius
     slack = 64 * jnp.finfo(tri.dtype).eps * (pp + cc + reach * reach)
     near = d2c <= reach * reach + slack
@@ -176,16 +182,16 @@ def _nearest_face(point, tri) -> Int[Array, ""]:
     (blocks,) = jnp.nonzero(near_blocks, size=_BLOCKS, fill_value=0)
     cand = blocks[:, None] * _BLOCK_FACES + jnp.arange(_BLOCK_FACES)
     cand = jnp.minimum(cand.reshape(-1), n - 1).astype(jnp.int32)
-    face, _, dist2 = _nearest_of(point, tri, cand)
+    face, _, dist2 = _nearest_of(point, tri, cand, real)
     pruned = jnp.sum(near_blocks) <= _BLOCKS
-    return _search_blocks(point, tri, pruned, face, dist2)
+    return _search_blocks(point, tri, real, pruned, face, dist2)
 
 
 #: Faces per step of the full search (bounds its temporaries on large meshes).
 _SEARCH_BLOCK = 4096
 
 
-def _search_blocks(point, tri, done, face, dist2):
+def _search_blocks(point, tri, real, done, face, dist2):
     """Where not `done`, the nearest face over all faces, a block at a time.
 
     A while loop over blocks, not `lax.cond`: under vmap a cond runs both branches
@@ -199,7 +205,7 @@ def _search_blocks(point, tri, done, face, dist2):
     def body(state):
         i, face, dist2 = state
         ids = jnp.minimum(i * block.shape[0] + block, n - 1)
-        f, _, d2 = _nearest_of(point, tri, ids)
+        f, _, d2 = _nearest_of(point, tri, ids, real)
         better = (d2 < dist2) | ((d2 == dist2) & (f < face))
         return i + 1, jnp.where(better, f, face), jnp.where(better, d2, dist2)
 

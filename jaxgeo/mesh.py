@@ -29,6 +29,7 @@ from scipy.sparse.csgraph import connected_components
 from ._errors import JaxgeoError
 from ._fans import vertex_fans
 from ._landmarks import DEFAULT_LANDMARKS, landmark_forests
+from ._padding import SizeClass, class_of, padded
 from ._precision import warn_if_x64_disabled
 
 #: A face whose area is below this fraction of the square of its longest edge is a
@@ -375,6 +376,16 @@ class Mesh(eqx.Module):
       `landmarks` landmark slots on the edge graph, from which the exact method
       reads its starting paths (`jaxgeo._landmarks`).
 
+    **Size classes.** The arrays above have the mesh's real sizes. The solvers
+    are handed `mesh.padded()`, the same arrays padded to the mesh's
+    `size_class`: vertex, face and boundary-edge counts and the fan width rounded
+    up to 2^j or 3·2^(j−1) (steps of about √2; edges follow, E = (3F + B)/2),
+    with inert padding (never located, crossed, or in a fan). A new mesh of a
+    class that was already compiled therefore runs its first path without
+    compiling, from memory or from the persistent cache
+    (`jaxgeo.enable_compilation_cache`). Results name real faces, edges and
+    vertices; gradients are with respect to the real `vertices` (`jaxgeo._padding`).
+
     **Raises** `JaxgeoError` for wrong shapes or dtypes, an empty mesh, NaN or
     infinite coordinates, out-of-range indices, degenerate or duplicate faces,
     non-manifold edges or vertices, and non-orientable surfaces. Inconsistently
@@ -458,6 +469,17 @@ class Mesh(eqx.Module):
     def boundary_edges(self) -> Int[Array, " B"]:
         """Indices of the edges with a single face (not jit-able: variable size)."""
         return jnp.flatnonzero(self.edge_faces[:, 1] < 0)
+
+    @property
+    def size_class(self) -> SizeClass:
+        """The padded counts the solvers compile for (see **Size classes**):
+        `(vertices, faces, edges, boundary, fan)`."""
+        return class_of(self)
+
+    def padded(self) -> Mesh:
+        """This mesh with its arrays padded to its `size_class` (what the jitted
+        solvers take; cached per mesh; differentiable in `vertices`)."""
+        return padded(self)
 
     def with_vertices(self, vertices: Float[Array, "V 3"]) -> Mesh:
         """The same connectivity with new vertex positions (no re-validation), for

@@ -247,7 +247,8 @@ def _lane(
         if options.candidates == "local":
             cand, live = local_candidates(mesh, kind, idx, star)
         else:
-            cand, live = all_edges, jnp.ones(all_edges.shape, bool)
+            # padded edges of a size class have no face (`Mesh.padded`)
+            cand, live = all_edges, mesh.edge_faces[:, 0] >= 0
         # Never step back onto the previous point's edge or through its vertex: on
         # a surface of revolution a chord through the axis has normal projections
         # on both sides, and a path bounced between two ring edges forever.
