@@ -213,7 +213,10 @@ def funnel(
     count, and False when the loop ran out of steps (it cannot for a valid sleeve:
     each restart moves on)."""
     cap = sleeves.left.shape[-1]
-    limit = 4 * cap + 8
+    # a guard, not a budget: each restart goes back to the portal after the new
+    # apex, so a sleeve of n portals takes up to n·(bends + 1) steps (a corridor
+    # of 182 faces needed more than 4·256 + 8 on the 20k catenoid)
+    limit = cap * (cap + 2) + 8
     lxy, rxy = jax.vmap(portal_xy)(sleeves)
 
     def point(sl, lx, rx, i):

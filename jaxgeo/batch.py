@@ -26,7 +26,7 @@ from ._errors import JaxgeoError
 from .geodesic import as_surface_point, checked_method, solve
 from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint
 from .mesh import Mesh
-from .methods import Method
+from .methods import Method, first_attempt
 from .normals import Weighting
 from .path import Path, Status
 
@@ -160,6 +160,7 @@ def shortest_paths(
     (pa, va), (pb, vb) = _as_rows(mesh, a), _as_rows(mesh, b)
     limit = jnp.asarray(max_distance, dtype)  # an array: no recompile per value
     padded = mesh.padded()  # padded to its size class: compiled once per class
+    first = first_attempt(m, max_points)
     pieces = []
     for start in range(0, n, chunk_size):
         stop = min(start + chunk_size, n)
@@ -172,8 +173,17 @@ def shortest_paths(
         ]
         if sharding is not None:
             chunk = [jax.device_put(x, sharding) for x in chunk]
-        paths = _solve_chunk(padded, *chunk, limit, m, max_points)
-        pieces.append(jax.tree.map(lambda x, k=stop - start: _gather(x)[:k], paths))
+
+        def run(method, chunk=chunk, k=stop - start):
+            paths = _solve_chunk(padded, *chunk, limit, method, max_points)
+            return jax.tree.map(lambda y: _gather(y)[:k], paths)
+
+        # a cheaper first attempt where one exists; the chunk again with `m` if a
+        # pair outgrew it (the same decision on every process: gathered stats)
+        piece = run(first) if first is not None else None
+        if piece is None or np.any(piece.stats.get("outgrew", 0)):
+            piece = run(m)
+        pieces.append(piece)
         if progress is not None:
             progress(stop, n)
     out = jax.tree.map(lambda *xs: np.concatenate(xs), *pieces)

@@ -59,6 +59,9 @@ class ExactStats(eqx.Module):
     starts: Int[Array, ""]  # starts refined
     starts_converged: Int[Array, ""]
     corridor_length: Int[Array, ""]  # faces in the final corridor
+    #: 1 if a lane's corridor outgrew `corridor_capacity` (its path then failed,
+    #: or another may be shorter): solve again with a larger capacity
+    outgrew: Int[Array, ""]
 
 
 def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
@@ -287,7 +290,7 @@ def _detours(mesh: Mesh, theta, corridor, n, s, t, k: int, tol):
             mesh, corridor, n, jnp.array([True]), vi[None], ai[None], bi[None],
             pi[None], di[None], ci[None],
         )  # fmt: skip
-        return new, new_n, fits & gi
+        return new, new_n, fits, gi
 
     return jax.vmap(one)(v[pick], a[pick], b[pick], p0, d, count, good)
 
@@ -535,14 +538,15 @@ def exact_solve(
 
     **Arguments:** `max_points`: capacity of the result's buffers; `max_starts`:
     landmark starts refined per pair; `max_iterations`: flip rounds at most;
-    `corridor_capacity`: faces a corridor may hold (default `max_points`);
-    `detours`: after the starts, refine this many corridors that pass the best
-    path's nearest cone vertices on their other side (`_detours`), in
-    `detour_rounds` rounds, each from the best path so far.
+    `corridor_capacity`: faces a corridor may hold (default `max_points`; a pair
+    any of whose lanes outgrew it has `stats.outgrew` set, see
+    `jaxgeo.geodesic.solve_with_retry`); `detours`: after the starts, refine this
+    many corridors that pass the best path's nearest cone vertices on their other
+    side (`_detours`), in `detour_rounds` rounds, each from the best path so far.
 
     **Returns:** an `ExactResult` with a leading batch axis.
     """
-    cap = corridor_capacity or max_points
+    cap = min(corridor_capacity or max_points, max_points)
     dtype = mesh.vertices.dtype
     tol = 10 * float(jnp.finfo(dtype).eps) ** 0.5
     s, t = (
@@ -571,17 +575,20 @@ def exact_solve(
     lanes = _refine(smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol)
     lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
     win, found = _shortest(lanes)
+    outgrew = jnp.any(lanes.status == Status.MAX_STEPS, axis=1)
     for _ in range(detour_rounds if detours else 0):
         # from the best path so far, the other side of its nearest cones
-        corridor, n, fits = jax.vmap(
+        corridor, n, fits, valid = jax.vmap(
             lambda c, m, a, b: _detours(smesh, theta, c, m, a, b, detours, tol)
         )(win.corridor, win.n, ss, ts)
         s_d = jax.tree.map(lambda x: jnp.repeat(x, detours, axis=0), ss)
         t_d = jax.tree.map(lambda x: jnp.repeat(x, detours, axis=0), ts)
         corridor, n = _clean(smesh, corridor.reshape(-1, cap), n.reshape(-1), s_d, t_d)
-        status0 = jnp.where(fits.reshape(-1), -1, Status.REFINE_FAILED).astype(
-            jnp.int32
-        )
+        status0 = jnp.where(
+            valid.reshape(-1),
+            jnp.where(fits.reshape(-1), -1, Status.MAX_STEPS),
+            Status.REFINE_FAILED,  # fewer candidate cones than detours
+        ).astype(jnp.int32)
         more = _refine(
             smesh, theta, corridor, n, status0, s_d, t_d, max_iterations, tol
         )
@@ -591,6 +598,7 @@ def exact_solve(
         )
         win, found2 = _shortest(both)
         found = found | found2
+        outgrew = outgrew | jnp.any(more.status == Status.MAX_STEPS, axis=1)
     status = jnp.where(found, Status.SUCCESS, lanes.status[:, 0])
     good = lanes.status == Status.SUCCESS
     stats = ExactStats(
@@ -599,6 +607,7 @@ def exact_solve(
         starts=jnp.sum(slot_ok, axis=1, dtype=jnp.int32),
         starts_converged=jnp.sum(good, axis=1, dtype=jnp.int32),
         corridor_length=win.n,
+        outgrew=outgrew.astype(jnp.int32),
     )
     return jax.vmap(lambda *a: _finish(mesh, *a, max_points))(
         start, end, s, t, win.corridor, win.n, status, stats

@@ -20,7 +20,14 @@ from ._checks import (
 from ._errors import JaxgeoError
 from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint, locate, vertex_valid
 from .mesh import Mesh
-from .methods import METHODS, AnyMethod, Method, as_method, initial_status
+from .methods import (
+    METHODS,
+    AnyMethod,
+    Method,
+    as_method,
+    first_attempt,
+    initial_status,
+)
 from .normals import Weighting
 from .path import Path, Status
 
@@ -171,16 +178,24 @@ def shortest_path(
         check_point("p1", p1, mesh)
         check_point("p2", p2, mesh)
     p1, p2 = as_endpoint(p1, mesh), as_endpoint(p2, mesh)
-    path, dist = _solve_one(
+    args = (
         mesh.padded(),  # padded to its size class: compiled once per class
         p1,
         p2,
         # an array, not a static float: a new value must not recompile
         jnp.asarray(max_distance, mesh.vertices.dtype),
-        m,
-        max_points,
-        not concrete,
     )
+    first = first_attempt(m, max_points) if concrete else None
+    if first is not None:
+        path, dist = _solve_one(*args, first, max_points, False)
+        if not int(path.stats.get("outgrew", 0)):
+            return _checked(path, dist, throw, mesh, max_distance)
+    path, dist = _solve_one(*args, m, max_points, not concrete)
+    return _checked(path, dist, throw, mesh, max_distance)
+
+
+def _checked(path: Path, dist, throw: bool, mesh: Mesh, max_distance) -> Path:
+    """`path`, or the error its status calls for when `throw`."""
     if throw:
         known = _known(path.status)
         if known is None:  # traced: the check runs with the program

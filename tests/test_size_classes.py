@@ -177,8 +177,16 @@ def _both(mesh, method, pairs):
     p1, p2 = v[pairs[idx, 0]], v[pairs[idx, 1]]
     got = jg.shortest_paths(mesh, p1, p2, method=method, max_points=EXACT_POINTS)
     limit = jnp.asarray(DEFAULT_MAX_DISTANCE, v.dtype)
+    points = np.full(chunk, -1, np.int32)  # rows are 3-D points, not vertex indices
     ref = _solve_chunk(
-        mesh, jnp.asarray(p1), jnp.asarray(p2), limit, as_method(method), EXACT_POINTS
+        mesh,
+        jnp.asarray(p1),
+        jnp.asarray(p2),
+        jnp.asarray(points),
+        jnp.asarray(points),
+        limit,
+        as_method(method),
+        EXACT_POINTS,
     )
     return got, jax.tree.map(np.asarray, ref)
 
