@@ -181,7 +181,7 @@ def test_cli_method_defaults_to_exact():
     assert args.method == "exact" and args.objective == "width"
 
 
-@pytest.mark.slow  # the stress optimiser's compile (shared with test_cutting_objective)
+@pytest.mark.slow  # compiles the stress optimiser: minutes on 2 cores
 def test_cli_objective_stress_writes_the_report(tmp_path, capsys):
     import json
 
@@ -189,7 +189,6 @@ def test_cli_objective_stress_writes_the_report(tmp_path, capsys):
 
     from jaxgeo.cutting import Material, Prestress
 
-    # the case of test_cutting_objective's optimiser test: one compiled solver
     v, f = surfaces.cone_tent(24, 6)
     trimesh.Trimesh(v, f, process=False).export(tmp_path / "t.obj")
     eps = Prestress(2.0, 1.5).strain(Material(600.0, 400.0, 0.3, 30.0))
