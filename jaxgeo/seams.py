@@ -272,9 +272,11 @@ def peaks_layout(
 def parallel_layout(mesh: Mesh, n: int, angle: float = 0.0) -> Layout:
     """`n` seams across a mesh with one boundary loop (a four-point sail), along
     parallel plan lines at `angle` degrees from the x axis (z up), spaced
-    uniformly across the loop: line `k` at `(k + 1)/(n + 1)` of the loop's plan
-    extent across the lines, so the `n + 1` cloths are bands of equal plan
-    width. Both ends of every seam lie on loop 0."""
+    uniformly across the loop through its centroid: line `k` at `(k + 1)/(n +
+    1)` of the loop's plan width there, measured across the lines (the width
+    between the sagging edge cables, not between the corners), so the `n + 1`
+    cloths are bands of equal plan width at the middle. Both ends of every seam
+    lie on loop 0."""
     loops = boundary_loops(mesh)
     if len(loops) != 1:
         raise JaxgeoError(
@@ -286,11 +288,14 @@ def parallel_layout(mesh: Mesh, n: int, angle: float = 0.0) -> Layout:
     th = math.radians(angle)
     d = np.array([math.cos(th), math.sin(th)])
     across = np.array([-d[1], d[0]])
-    t = op[:, :2] @ across
     centre = op[:-1, :2].mean(axis=0)
+    lo, hi = _ray_hit(op, centre, -across), _ray_hit(op, centre, across)
+    if lo is None or hi is None:
+        raise JaxgeoError("parallel_layout: the loop's centroid lies outside it")
+    t0, t1 = lo[:2] @ across, hi[:2] @ across
     sa, sb = [], []
     for k in range(n):
-        off = t.min() + (k + 1) / (n + 1) * (t.max() - t.min())
+        off = t0 + (k + 1) / (n + 1) * (t1 - t0)
         c = centre + (off - centre @ across) * across
         a, b = _ray_hit(op, c, -d), _ray_hit(op, c, d)
         if a is None or b is None:

@@ -66,11 +66,13 @@ def measure(mesh, layout, compensation: Compensation, method: str) -> dict:
     return {"max": total["max"], "rms": total["rms"], "widest": float(pat.widths.max())}
 
 
-def run(steps: int, rounds: int, log) -> list[dict]:
+def run(steps: int, rounds: int, log, only: str | None = None) -> list[dict]:
     eps = np.asarray(PRESTRESS.strain(MATERIAL))[:2]
     comp = Compensation(*(100 * eps))
     rows = []
     for c in cases():
+        if only and only not in c.name:
+            continue
         settings = Settings(MATERIAL, PRESTRESS, tuple(map(float, eps)), c.roll_width)
         method = settings.method
         log(f"{c.name}: {c.mesh.n_faces} faces, {c.layout.n_seams} seams")
@@ -118,13 +120,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=6, help="optimiser steps per round")
     p.add_argument("--rounds", type=int, default=2, help="rounds of each optimiser")
     p.add_argument("--json", default=None, help="write the rows here too")
+    p.add_argument("--only", default=None, help="the cases whose name has this")
     a = p.parse_args(argv)
     t0 = time.time()
 
     def log(msg: str) -> None:
         print(f"[{time.time() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
 
-    rows = run(a.steps, a.rounds, log)
+    rows = run(a.steps, a.rounds, log, a.only)
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=2)
