@@ -197,15 +197,16 @@ def _safe_norm(d):
     return jnp.sqrt(jnp.sum(d * d, axis=-1) + 1e-30)
 
 
-def _linear_solver(name: str, n_vertices: int):
+def _gauss_newton(name: str, n_vertices: int) -> optx.GaussNewton:
     if name == "auto":
         name = "qr" if n_vertices <= QR_LIMIT else "lsmr"
     if name == "qr":
-        return lx.QR()
+        return optx.GaussNewton(rtol=1e-10, atol=1e-12, linear_solver=lx.QR())
     if name == "lsmr":
-        # tolerances as tight as float64 allows: the adjoint's accuracy is the
-        # gradient's (LSMR's conlim guards against ill-conditioning)
-        return lx.LSMR(rtol=1e-12, atol=1e-12, max_steps=20 * n_vertices)
+        # an iterative solve's steps carry ~1e-10 of error: the Gauss-Newton
+        # tolerance is set above it (a tighter one is never met)
+        ls = lx.LSMR(rtol=1e-12, atol=1e-12, max_steps=4 * n_vertices)
+        return optx.GaussNewton(rtol=1e-8, atol=1e-10, linear_solver=ls)
     raise JaxgeoError(f"unknown flattening solver {name!r}; use auto, qr or lsmr")
 
 
@@ -229,9 +230,7 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="auto"):
         rotn = jnp.sum(r0[:, 0] * u[:, 1] - r0[:, 1] * u[:, 0]) / scale
         return r_e, pins, c / scale, rotn / scale
 
-    solver = optx.GaussNewton(
-        rtol=1e-10, atol=1e-12, linear_solver=_linear_solver(solver, uv0.shape[0])
-    )
+    solver = _gauss_newton(solver, uv0.shape[0])
     sol = optx.least_squares(
         residuals,
         solver,
