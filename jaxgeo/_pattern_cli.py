@@ -1,9 +1,12 @@
 """`jaxgeo pattern MESH --seams N --roll-width W --out DIR`: seam layout and its
-optimisation, cut cloths with prestress compensation and allowances (DXF, SVG),
-the reassembly stress check (figure, JSON report) and the seams (OBJ).
+optimisation (for roll width and equal seams, or `--objective stress` for the
+reassembly stress deviation), cut cloths with prestress compensation and
+allowances (DXF, SVG), the reassembly stress check (figure, JSON report) and the
+seams (OBJ).
 
-Exit codes: 0 the pattern fits the roll, 2 usage error, 3 the pattern does not
-fit the roll (the message names the widest cloth and suggests a seam count)."""
+Exit codes: 0 the pattern fits the roll, 1 the stress optimisation could not
+start (a seam or a flattening failed), 2 usage error, 3 the pattern does not fit
+the roll (the message names the widest cloth and suggests a seam count)."""
 
 from __future__ import annotations
 
@@ -55,18 +58,26 @@ def add_pattern_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=int, default=3, help="calibration rounds")
     p.add_argument(
         "--method",
-        choices=("laser", "exact", "smooth"),
-        default="laser",
-        help="geodesic method of the final seams (the width optimisation "
-        "moves seams with the laser method)",
+        choices=("exact", "laser", "smooth"),
+        default="exact",
+        help="geodesic method of the final seams (both optimisations move "
+        "seams with the laser method, whose points are differentiable)",
     )
     p.add_argument(
         "--objective",
         choices=("width", "stress"),
         default="width",
         help="what the seam optimisation minimises: roll fit and equal seams "
-        "(width), or the reassembly stress deviation (stress: not yet in the "
-        "CLI, see jaxgeo.cutting.objective)",
+        "(width), or the RMS reassembly stress deviation plus waste and roll "
+        "fit (stress: jaxgeo.cutting.optimise_seams, BFGS; each step is one "
+        "gradient of the whole cut, so use few --steps and --rounds)",
+    )
+    p.add_argument(
+        "--direction",
+        type=float,
+        default=0.0,
+        help="plan direction (degrees from x) of the parallel seams of a mesh "
+        "with one boundary loop (a four-point sail)",
     )
     p.add_argument(
         "--compensation",
@@ -125,7 +136,9 @@ def run_pattern(args: argparse.Namespace) -> int:
         Compensation,
         Material,
         Prestress,
+        Settings,
         compensate_pattern,
+        optimise_seams,
         reassemble,
     )
     from .cutting.export import write_dxf, write_svg
@@ -136,11 +149,6 @@ def run_pattern(args: argparse.Namespace) -> int:
 
     if args.seams < 1 or not args.roll_width > 0:
         return _usage("--seams must be >= 1 and --roll-width > 0")
-    if args.objective == "stress":
-        return _usage(
-            "--objective stress is not wired into the CLI yet; use "
-            "jaxgeo.cutting.objective from Python"
-        )
     try:
         material = Material(*args.material)
         prestress = Prestress(*args.prestress)
@@ -160,7 +168,9 @@ def run_pattern(args: argparse.Namespace) -> int:
         return _usage(f"cannot read {args.mesh}: {e}")
     loops = sm.boundary_loops(mesh)
     log(f"{args.mesh}: {mesh.n_faces} faces, {len(loops)} boundary loops")
-    if len(loops) == 2:
+    if len(loops) == 1:
+        layout = sm.parallel_layout(mesh, args.seams, args.direction)
+    elif len(loops) == 2:
         layout = sm.radial_layout(mesh, args.seams)
     elif len(loops) == 3:
         xs = np.asarray(mesh.vertices)[:, 0]
@@ -168,16 +178,43 @@ def run_pattern(args: argparse.Namespace) -> int:
         layout = sm.peaks_layout(mesh, args.seams, args.valley, half)
     else:
         return _usage(
-            f"need a tent with 2 or 3 boundary loops, {args.mesh} has {len(loops)}"
+            f"need a membrane with 1, 2 or 3 boundary loops, {args.mesh} has "
+            f"{len(loops)}"
         )
     log(f"{layout.n_seams} seams; tracing (the first call compiles, ~40 s)")
-    first, layout, pat, history = sm.fit_roll(
-        mesh, layout, args.roll_width, rounds=args.rounds, steps=args.steps, log=log
-    )
-    cut, paths = sm.cut(mesh, layout, method=args.method)
-    if args.method != "laser":
+    if args.objective == "width":
+        first, layout, pat, history = sm.fit_roll(
+            mesh,
+            layout,
+            args.roll_width,
+            rounds=args.rounds,
+            steps=args.steps,
+            method=args.method,
+            log=log,
+        )
+        j_start = first.j_start
+        rounds = [{"objective": j, "widest": w} for j, w in history]
+        j_end = history[-1][0] if history else j_start
+        cut, paths = sm.cut(mesh, layout, method=args.method)
+    else:
         from .pattern import make_pattern
 
+        settings = Settings(
+            material,
+            prestress,
+            (args.compensation[0] / 100, args.compensation[1] / 100),
+            args.roll_width,
+        )
+        log("stress objective: the first round compiles (minutes)")
+        try:
+            res = optimise_seams(
+                mesh, layout, settings, steps=args.steps, rounds=args.rounds, log=log
+            )
+        except JaxgeoError as e:
+            print(f"jaxgeo pattern: {e}", file=sys.stderr)
+            return 1
+        layout, j_start, j_end, rounds = res.layout, res.j_start, res.j_end, res.rounds
+        cut, paths = sm.cut(mesh, layout, method=args.method)
         pat = make_pattern(cut)
     polylines = [
         np.asarray(paths.points[i])[: int(paths.count[i])]
@@ -200,15 +237,16 @@ def run_pattern(args: argparse.Namespace) -> int:
         "mesh": str(args.mesh),
         "roll_width": args.roll_width,
         "method": args.method,
+        "objective": args.objective,
         "material": dict(zip(("e_warp", "e_weft", "nu", "g"), args.material)),
         "prestress": dict(zip(("warp", "weft"), args.prestress)),
         "compensation_percent": dict(zip(("warp", "weft"), args.compensation)),
         "allowance": {"weld": weld, "boundary": boundary},
         "all_fit": fits,
         "stress_deviation": {k: total[k] for k in ("max", "rms", "mean")},
-        "objective_start": first.j_start,
-        "objective_end": history[-1][0] if history else first.j_start,
-        "rounds": [{"objective": j, "widest": w} for j, w in history],
+        "objective_start": j_start,
+        "objective_end": j_end,
+        "rounds": rounds,
         "seams": [
             {
                 "loops": [int(a), int(b)],

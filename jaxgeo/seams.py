@@ -14,9 +14,11 @@ parameters `x = (s_a, s_b)` are optimised.
 - the objective, with roll width `W` and target `W_t = (1 − margin)·W`:
 
       J = α Σ_c relu(w_c/W_t − 1)²                        (fit the roll)
-        + β (1/C) Σ_c (1 − w_c/W_t)²                      (fill the roll)
+        + β mean_c (1 − w_c/W_t)²                         (fill the roll)
         + γ Σ_{c: |S_c|=2} ((L_i − L_j)/L̄)²               (equal seam lengths)
 
+  A cloth with a single seam (between it and the boundary) has no width
+  measure and is left out of the fit and fill terms (and of the mean).
   The geodesic seams flatten to their own length within the flattening strain
   (`jaxgeo.pattern` fits seam edges 10× harder), so the 3-D lengths stand for the
   flattened ones.
@@ -68,6 +70,7 @@ __all__ = [
     "cloth_widths",
     "objective",
     "optimise",
+    "parallel_layout",
     "peaks_layout",
     "radial_layout",
     "trace_seams",
@@ -266,6 +269,42 @@ def peaks_layout(
     return _layout(loops, la, lb, sa, sb)
 
 
+def parallel_layout(mesh: Mesh, n: int, angle: float = 0.0) -> Layout:
+    """`n` seams across a mesh with one boundary loop (a four-point sail), along
+    parallel plan lines at `angle` degrees from the x axis (z up), spaced
+    uniformly across the loop through its centroid: line `k` at `(k + 1)/(n +
+    1)` of the loop's plan width there, measured across the lines (the width
+    between the sagging edge cables, not between the corners), so the `n + 1`
+    cloths are bands of equal plan width at the middle. Both ends of every seam
+    lie on loop 0."""
+    loops = boundary_loops(mesh)
+    if len(loops) != 1:
+        raise JaxgeoError(
+            f"parallel_layout needs one boundary loop, the mesh has {len(loops)}"
+        )
+    if n < 1:
+        raise JaxgeoError("parallel_layout needs n >= 1 seams")
+    op = loops[0].polyline(mesh)
+    th = math.radians(angle)
+    d = np.array([math.cos(th), math.sin(th)])
+    across = np.array([-d[1], d[0]])
+    centre = op[:-1, :2].mean(axis=0)
+    lo, hi = _ray_hit(op, centre, -across), _ray_hit(op, centre, across)
+    if lo is None or hi is None:
+        raise JaxgeoError("parallel_layout: the loop's centroid lies outside it")
+    t0, t1 = lo[:2] @ across, hi[:2] @ across
+    sa, sb = [], []
+    for k in range(n):
+        off = t0 + (k + 1) / (n + 1) * (t1 - t0)
+        c = centre + (off - centre @ across) * across
+        a, b = _ray_hit(op, c, -d), _ray_hit(op, c, d)
+        if a is None or b is None:
+            raise JaxgeoError("parallel_layout: a seam line misses the boundary")
+        sa.append(loop_parameter(mesh, loops[0], a))
+        sb.append(loop_parameter(mesh, loops[0], b))
+    return _layout(loops, [0] * n, [0] * n, sa, sb)
+
+
 def _cum(poly: np.ndarray) -> np.ndarray:
     c = np.concatenate(
         [[0.0], np.cumsum(np.linalg.norm(np.diff(poly, axis=0), axis=1))]
@@ -288,7 +327,7 @@ def _unwrap(pts: np.ndarray, centre: np.ndarray, side: float) -> np.ndarray:
 
 
 @eqx.filter_jit
-def _trace_batch(mesh, packed, loop_a, loop_b, s_a, s_b, options, method="laser"):
+def _trace_batch(mesh, packed, loop_a, loop_b, s_a, s_b, options, method="exact"):
     def one(la, lb, a, b):
         p1 = packed_point(mesh, packed, la, a, INSET)
         p2 = packed_point(mesh, packed, lb, b, INSET)
@@ -310,10 +349,11 @@ def trace_seams(
     mesh: Mesh,
     layout: Layout,
     options: TraceOptions | None = None,
-    method: str = "laser",
+    method: str = "exact",
 ) -> tuple[Path, np.ndarray]:
     """Trace every seam of `layout` (one vmapped, jitted call of
-    `jaxgeo.shortest_path` with `method`).
+    `jaxgeo.shortest_path` with `method`: the exact geodesic by default, as
+    everywhere in jaxgeo; `options.candidates` acts on the laser method only).
 
     **Returns:** `(paths, end_bary)`: a batched `Path` (leading axis N) and the
     endpoints' barycentric coordinates `(N, 2, 3)`.
@@ -384,7 +424,10 @@ def cloth_widths(
     d = jax.vmap(one)(pairs)  # (P, M)
     n_groups = cloth_of_group.shape[0]
     near = jax.ops.segment_min(d, group, num_segments=n_groups)  # (G, M)
-    return jax.ops.segment_max(near.max(axis=1), cloth_of_group, num_segments=n_cloths)
+    w = jax.ops.segment_max(near.max(axis=1), cloth_of_group, num_segments=n_cloths)
+    # a cloth with one seam (between a seam and the boundary) has no other seam
+    # to measure against: width 0, left out of the objective (`objective`)
+    return jnp.where(jnp.isfinite(w), w, 0.0)
 
 
 def _width_index(cloth_seams: list[list[int]]):
@@ -418,9 +461,10 @@ def objective(
 ) -> tuple[Float[Array, ""], dict]:
     """The layout objective J (module docstring) and its three terms."""
     wt = (1.0 - weights.margin) * roll_width
-    r = widths / wt
+    measured = widths > 0  # cloths with one seam have no width measure
+    r = jnp.where(measured, widths / wt, 1.0)
     fit = jnp.sum(jax.nn.relu(r - 1.0) ** 2)
-    fill = jnp.mean((1.0 - r) ** 2)
+    fill = jnp.sum((1.0 - r) ** 2) / jnp.maximum(jnp.sum(measured), 1)
     if pairs.shape[0]:
         dl = (lengths[pairs[:, 0]] - lengths[pairs[:, 1]]) / jnp.mean(lengths)
         equal = jnp.sum(dl**2)
@@ -475,7 +519,8 @@ class _Evaluator:
         lay = self.layout.with_x(x)
         if _cyclic_orders(lay, x) != self.order:
             return math.inf, None, None
-        paths, _ = trace_seams(self.mesh, lay, self.w.options)
+        # the replay re-solves the laser ray's crossings (System 16): trace with it
+        paths, _ = trace_seams(self.mesh, lay, self.w.options, "laser")
         if np.any(np.asarray(paths.status) != Status.SUCCESS):
             return math.inf, None, None
         (j, aux), g = _value_and_grad(
@@ -588,10 +633,10 @@ def cut(
     mesh: Mesh,
     layout: Layout,
     options: TraceOptions | None = None,
-    method: str = "laser",
+    method: str = "exact",
 ):
-    """Trace the seams of `layout` and cut `mesh` along them
-    (`jaxgeo.pattern.cut_mesh`). Returns `(cut_mesh, paths)`."""
+    """Trace the seams of `layout` with `method` (exact by default) and cut
+    `mesh` along them (`jaxgeo.pattern.cut_mesh`). Returns `(cut_mesh, paths)`."""
     from .pattern import cut_mesh
 
     paths, ends = trace_seams(mesh, layout, options, method)
@@ -610,11 +655,13 @@ def fit_roll(
     rounds: int = 3,
     steps: int = 25,
     weights: Weights = Weights(),
+    method: str = "exact",
     log: Callable[[str], None] | None = None,
 ):
     """Optimise `layout` until every flattened cloth fits the roll.
 
-    Each round runs `optimise`, cuts and flattens the result
+    Each round runs `optimise` (laser seams, replayed), cuts along the seams
+    traced with `method` (exact by default) and flattens the result
     (`jaxgeo.pattern.make_pattern`) and rescales each cloth's width measure by
     flattened/measured width (the 3-D distance between seams misses the bend a
     cloth takes when flattened), then optimises again from there.
@@ -625,7 +672,7 @@ def fit_roll(
     from .pattern import make_pattern
 
     log = log or (lambda msg: None)
-    cut0, _ = cut(mesh, layout, weights.options)
+    cut0, _ = cut(mesh, layout, weights.options, method)
     cloth_seams = cut0.cloth_seams()
     pat = make_pattern(cut0)
     log(f"start: {cut0.n_cloths} cloths, widest {pat.widths.max():.4g}")
@@ -643,7 +690,7 @@ def fit_roll(
             progress=lambda k, j, r=r: log(f"round {r + 1} step {k}: J = {j:.5g}"),
         )
         first = first or res
-        c, _ = cut(mesh, res.layout, weights.options)
+        c, _ = cut(mesh, res.layout, weights.options, method)
         if c.cloth_seams() != cloth_seams:
             log("the cloth topology changed; keeping the previous layout")
             break
@@ -652,7 +699,10 @@ def fit_roll(
         log(f"round {r + 1}: J = {res.j_end:.5g}, widest {pat.widths.max():.4g}")
         if (pat.widths <= roll_width).all():
             break
-        scale = scale * pat.widths / res.widths_end
+        # cloths with one seam have no width measure (0): keep their scale
+        measured = res.widths_end > 0
+        ratio = pat.widths / np.where(measured, res.widths_end, 1.0)
+        scale = np.where(measured, scale * ratio, scale)
     return first, current, pat, history
 
 

@@ -11,7 +11,11 @@ NOTEBOOKS = Path(__file__).resolve().parent.parent / "notebooks"
 ALL = sorted(NOTEBOOKS.glob("*.ipynb"))
 #: Notebooks committed executed, figures inline. To refresh one after a change:
 #: `jupyter nbconvert --to notebook --execute --inplace notebooks/NAME.ipynb`.
-STORED = [NOTEBOOKS / "01_validation.ipynb", NOTEBOOKS / "02_gradients.ipynb"]
+STORED = [
+    NOTEBOOKS / "01_validation.ipynb",
+    NOTEBOOKS / "02_gradients.ipynb",
+    NOTEBOOKS / "05_four_point_sail.ipynb",
+]
 
 
 def _code_cells(nb) -> list:

@@ -1,4 +1,5 @@
-"""Seam-layout optimisation on the twin-peak tent (no rotational symmetry)."""
+"""Seam layouts; their optimisation on the twin-peak tent (no rotational
+symmetry)."""
 
 import numpy as np
 import pytest
@@ -6,10 +7,33 @@ import pytest
 import jaxgeo as jg
 from jaxgeo import seams, surfaces
 
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
+
+@pytest.mark.slow  # a new mesh shape: ~14 s of compiles on the shared machine
+def test_parallel_layout_spans_the_sail_in_equal_bands():
+    from jaxgeo.cutting.formfinding import four_point_sail
+
+    sail = four_point_sail(8)
+    mesh = jg.Mesh(sail.vertices, sail.faces)
+    layout = seams.parallel_layout(mesh, 3)
+    assert layout.n_seams == 3 and (layout.loop_a == 0).all()
+    ends = layout.end_points(mesh)
+    # seams parallel to x: both ends of a seam at one y, the lines at 1/4, 2/4,
+    # 3/4 of the sail's plan width at x = 3 (the centroid), between the sagging
+    # south and north cables; loop_parameter's projection onto the boundary
+    # polyline is exact to rounding (1e-9 of the 6 m span)
+    south = sail.cable_polyline("south")  # x increasing from corner to corner
+    lo = np.interp(3.0, south[:, 0], south[:, 1])
+    hi = 6.0 - lo  # the plan net is symmetric (FDM solves x, y apart from z)
+    assert lo > 0.1  # the cable sags: a band from the corners' extent would be off
+    assert np.allclose(ends[:, 0, 1], ends[:, 1, 1], atol=1e-9 * 6)
+    expected = lo + (hi - lo) * np.array([1, 2, 3]) / 4
+    assert np.allclose(ends[:, 0, 1], expected, atol=1e-9 * 6)
+    assert (ends[:, 0, 0] < ends[:, 1, 0]).all()  # from the west cable to the east
+    with pytest.raises(jg.JaxgeoError, match="one boundary loop"):
+        seams.parallel_layout(jg.Mesh(*surfaces.cone_tent(12, 3)), 3)
 
 
+@pytest.mark.slow  # compiles several solvers, 3 rounds of 20 BFGS steps
 def test_twin_peak_optimisation_fits_the_roll():
     mesh = jg.Mesh(*surfaces.twin_peak_tent(n_side=8, n_radial=10))
     layout = seams.peaks_layout(mesh, 7, 3, 0.4, sector=172)

@@ -15,4 +15,6 @@ from .material import (
     Material as Material,
     Prestress as Prestress,
 )
+from .objective import Settings as Settings
+from .optimise import StressResult as StressResult, optimise_seams as optimise_seams
 from .reassembly import Reassembly as Reassembly, reassemble as reassemble

@@ -1,0 +1,143 @@
+"""Before/after table of the reassembly stress deviation: uniform seams, the
+width-only optimisation (`jaxgeo.seams.fit_roll`) and the stress optimisation
+(`optimise_seams`), on the twin-peak tent and the four-point sail.
+
+    python -m jaxgeo.cutting.compare --steps 6 --rounds 2
+
+Every layout is measured the same way: seams traced with the optimiser's
+method, cut, flattened by `jaxgeo.pattern.make_pattern`, compensated by the
+design prestress strain and checked by `reassemble` (numpy).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+
+import numpy as np
+
+from .. import seams as sm
+from ..mesh import Mesh
+from ..pattern import make_pattern
+from ..trace import TraceOptions
+from .compensate import compensate_pattern
+from .material import Compensation, Material, Prestress
+from .objective import Settings
+from .optimise import optimise_seams
+from .reassembly import reassemble
+
+MATERIAL = Material(600.0, 400.0, 0.3, 30.0)
+PRESTRESS = Prestress(2.0, 1.5)
+
+
+@dataclasses.dataclass
+class Case:
+    name: str
+    mesh: Mesh
+    layout: sm.Layout
+    roll_width: float
+
+
+def cases() -> list[Case]:
+    """The twin-peak tent (example mesh, 17 seams) and the four-point sail
+    (`surfaces.four_point_sail()`, 4 seams parallel to x; a middle seam would
+    run along mesh edges, where no step keeps the cut)."""
+    from .. import surfaces
+    from ..data import example_mesh_path
+    from ..mesh import load_mesh
+
+    tent = load_mesh(example_mesh_path("twin_peak_tent"))
+    sail = Mesh(*surfaces.four_point_sail())
+    peaks = sm.peaks_layout(tent, 7, 3, 0.4, sector=172)
+    return [
+        Case("twin-peak tent", tent, peaks, 0.75),
+        Case("four-point sail", sail, sm.parallel_layout(sail, 4), 2.5),
+    ]
+
+
+def measure(mesh, layout, compensation: Compensation, method: str) -> dict:
+    """Stress deviation (max, RMS; kN/m) and widest cloth of `layout`'s pattern."""
+    cut, _ = sm.cut(mesh, layout, TraceOptions("local", 160), method)
+    pat = make_pattern(cut)
+    cloths = compensate_pattern(pat, compensation)
+    total = reassemble(cloths, MATERIAL, PRESTRESS).total_stats()
+    return {"max": total["max"], "rms": total["rms"], "widest": float(pat.widths.max())}
+
+
+def run(steps: int, rounds: int, log, only: str | None = None) -> list[dict]:
+    eps = np.asarray(PRESTRESS.strain(MATERIAL))[:2]
+    comp = Compensation(*(100 * eps))
+    rows = []
+    for c in cases():
+        if only and only not in c.name:
+            continue
+        settings = Settings(MATERIAL, PRESTRESS, tuple(map(float, eps)), c.roll_width)
+        method = settings.method
+        log(f"{c.name}: {c.mesh.n_faces} faces, {c.layout.n_seams} seams")
+        t = time.time()
+        uniform = measure(c.mesh, c.layout, comp, method)
+        log(f"  uniform {uniform} ({time.time() - t:.0f} s)")
+        t = time.time()
+        _, lw, _, _ = sm.fit_roll(
+            c.mesh, c.layout, c.roll_width, rounds=rounds, steps=steps, method=method
+        )
+        width = measure(c.mesh, lw, comp, method)
+        log(f"  width-only {width} ({time.time() - t:.0f} s)")
+        t = time.time()
+        res = optimise_seams(
+            c.mesh, c.layout, settings, steps=steps, rounds=rounds, log=log
+        )
+        stress = measure(c.mesh, res.layout, comp, method)
+        log(f"  stress {stress} ({time.time() - t:.0f} s)")
+        rows.append(
+            {"case": c.name, "uniform": uniform, "width": width, "stress": stress}
+        )
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    out = [
+        "| surface | seams | max (kN/m) | RMS (kN/m) | RMS vs uniform "
+        "| widest cloth (m) |",
+        "|---|---|---|---|---|---|",
+    ]
+    names = {"uniform": "uniform", "width": "width-only", "stress": "stress-optimised"}
+    for r in rows:
+        base = r["uniform"]["rms"]
+        for key, label in names.items():
+            m = r[key]
+            out.append(
+                f"| {r['case']} | {label} | {m['max']:.3g} | {m['rms']:.4g} | "
+                f"{100 * (m['rms'] / base - 1):+.1f} % | {m['widest']:.3f} |"
+            )
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m jaxgeo.cutting.compare")
+    p.add_argument("--steps", type=int, default=6, help="optimiser steps per round")
+    p.add_argument("--rounds", type=int, default=2, help="rounds of each optimiser")
+    p.add_argument("--json", default=None, help="write the rows here too")
+    p.add_argument("--only", default=None, help="the cases whose name has this")
+    a = p.parse_args(argv)
+    t0 = time.time()
+
+    def log(msg: str) -> None:
+        print(f"[{time.time() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+    rows = run(a.steps, a.rounds, log, a.only)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(rows, f, indent=2)
+    print(table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    raise SystemExit(main())
