@@ -22,11 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-#: Gauss–Legendre nodes and weights on [0, 1], by number of points.
+#: Gauss–Legendre nodes and weights on [0, 1], by number of points. numpy, not jax
+#: arrays: this module is first imported inside a jit trace (`methods.Smooth.solve`
+#: imports `smooth` lazily), where a module-level `jnp.asarray` would be a tracer
+#: that leaks into every later trace (UnexpectedTracerError).
 _GAUSS = {
     n: (
-        jnp.asarray(0.5 * (np.polynomial.legendre.leggauss(n)[0] + 1.0)),
-        jnp.asarray(0.5 * np.polynomial.legendre.leggauss(n)[1]),
+        0.5 * (np.polynomial.legendre.leggauss(n)[0] + 1.0),
+        0.5 * np.polynomial.legendre.leggauss(n)[1],
     )
     for n in (2, 3, 4, 5, 6, 8)
 }

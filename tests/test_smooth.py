@@ -58,6 +58,25 @@ def _smooth(mesh: Mesh, start: SurfacePoint, end: SurfacePoint, **options):
 # --------------------------------------------------------------------------- surface
 
 
+def test_no_module_holds_a_jax_array():
+    """A module first imported inside a jit trace (`methods.Smooth.solve` imports
+    `smooth` lazily) must not create jax arrays at import: they would be tracers,
+    leaked into every later trace (`_phong._GAUSS` did: UnexpectedTracerError in
+    `jit(path_length(method="smooth"))` when nothing had imported it before)."""
+    import importlib
+    import pkgutil
+
+    held = []
+    for info in pkgutil.walk_packages(jaxgeo.__path__, "jaxgeo."):
+        if info.name.endswith("__main__"):
+            continue
+        module = importlib.import_module(info.name)
+        for name, value in vars(module).items():
+            if any(isinstance(x, jax.Array) for x in jax.tree.leaves(value)):
+                held.append(f"{info.name}.{name}")
+    assert not held
+
+
 def test_phong_edge_curve_depends_on_edge_only():
     """α = ½ (any α): a point on an edge lifts to the same point from either face,
     whatever the third vertices and their normals; corners lift to the vertices."""
