@@ -1,5 +1,9 @@
 """Geodesics on the Phong tessellation (`jaxgeo.smooth`, `jaxgeo._phong`).
 
+The surface's formulas run in the fast set (eager, small arrays); every smooth
+path compiles the exact and the smooth solvers (about a minute), so those tests
+are slow.
+
 Acceptance (issue 9): on the validation suites' vertex pairs the smooth geodesic's
 median |relative error| against the analytic length is ≤ 1e-5 on the 5,120-face
 icosphere (and ≥ 50× below the exact polyhedral geodesic's) and ≤ 1e-6 on the
@@ -29,9 +33,6 @@ from jaxgeo.smooth import (
     smooth_shortest_path,
 )
 from jaxgeo.surfaces import icosphere
-
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
 
 CAPACITY = 256  # one compiled shape for every path of a mesh
 
@@ -136,6 +137,7 @@ def sphere():
     return suite, Mesh(suite.vertices, suite.faces)
 
 
+@pytest.mark.slow
 def test_sphere_acceptance(sphere):
     """5,120-face icosphere: median |rel. error| ≤ 1e-5 and ≥ 50× below MMP."""
     pygeodesic = pytest.importorskip("pygeodesic.geodesic")
@@ -156,6 +158,7 @@ def test_sphere_acceptance(sphere):
     assert med_smooth * 50 <= med_exact
 
 
+@pytest.mark.slow
 def test_catenoid_acceptance():
     """Catenoid (6,144 faces, the suite's level 4: the nearest to issue 9's "about
     4,000"), the suite's 13 pairs, through `shortest_path(method="smooth")` with
@@ -177,6 +180,7 @@ def test_catenoid_acceptance():
     assert np.median(np.abs(err)) <= 1e-6
 
 
+@pytest.mark.slow
 def test_shortest_path_smooth_repairs_with_the_requested_weighting():
     """`shortest_path(method="smooth", normals="angle")` repairs the strip and
     solves on the same (angle-weighted, boundary-fitted) surface: its length is the
@@ -193,6 +197,7 @@ def test_shortest_path_smooth_repairs_with_the_requested_weighting():
         np.testing.assert_allclose(float(path.length), float(want.length), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_converges_when_the_path_grazes_vertices():
     """Sphere suite level 6 (81,920 faces), pair S3: a great circle along mesh
     edges, whose smooth geodesic passes ~1e-8 from vertices. There the Hessian is
@@ -230,6 +235,7 @@ def test_phong_normals_boundary_option():
 # --------------------------------------------------------------------------- gradients
 
 
+@pytest.mark.slow
 def test_gradient_matches_central_differences(sphere):
     """dL/d(vertices) and dL/d(endpoint barycentrics) by the envelope theorem vs
     central differences (step 1e-6) on a fixed strip, path away from vertices."""
