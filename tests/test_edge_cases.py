@@ -245,6 +245,7 @@ def test_identical_endpoints_give_length_zero(where):
     assert int(path.count) == 2 and float(path.length) == 0.0
 
 
+@pytest.mark.slow  # a SurfacePoint endpoint: a solver compile of its own
 def test_identical_surface_points_give_length_zero():
     sp = jg.SurfacePoint(jnp.asarray(5), jnp.array([0.0, 0.0, 1.0]))
     assert float(ok(jg.shortest_path(FLAT, sp, sp)).length) == 0.0

@@ -91,6 +91,7 @@ def test_far_point_under_jit_is_a_status():
     assert int(lengths_status) == jg.Status.FAR_FROM_SURFACE
 
 
+@pytest.mark.slow  # a mesh of its own (two spheres): compiles
 def test_points_on_different_components_raise():
     v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
     two = jg.Mesh(np.vstack([v, v + [5.0, 0, 0]]), np.vstack([f, f + len(v)]))

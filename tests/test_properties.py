@@ -15,8 +15,14 @@ Endpoints are drawn as vertices (so the exact polyhedral geodesic of pygeodesic,
 test-only, is a lower bound), points inside faces and points on edges, including
 boundary edges.
 
-Profiles (`tests/conftest.py`): `ci` (default) runs ≥ 200 examples in all;
-`HYPOTHESIS_PROFILE=long pytest tests/test_properties.py` runs 20× more.
+Every test asserts a success rate besides the invariants of each path (a test
+whose paths all failed would otherwise pass: `check_path` checks only the status
+of a failed path): the exact default succeeds on every pair; the laser on closed
+meshes too, on open ones at a stated rate (`LASER_RATE`).
+
+Profiles (`tests/conftest.py`): `ci` (default) runs 90 examples per family and
+method; `HYPOTHESIS_PROFILE=long pytest -m slow tests/test_properties.py` runs
+20× more. The fast set runs `test_perturbed_sphere_few_examples` only.
 """
 
 from __future__ import annotations
@@ -286,12 +292,13 @@ def assert_rate(
 
 # Success rates. The exact method succeeds on every pair of a connected mesh,
 # closed or open (its corridors come from the mesh graph, not from a ray).
-# The laser ray (the paper's method) stops with NO_CROSSING where the chord's
-# projection leaves an open mesh (a concave boundary ahead) and cannot slide on:
-# on patches and tents a stated rate, measured on the `ci` profile's examples
-# (derandomized): see the comments at each rate. On closed meshes it always
-# continues: all succeed.
-LASER_RATE = {"sphere": 1.0, "patch": 0.8, "tent": 0.6, "patch32": 0.8}
+# The laser ray (the paper's method) may stop with NO_CROSSING where the chord's
+# projection leaves an open mesh (a concave boundary ahead) and cannot slide on,
+# so on patches and tents the rate is stated, not total: measured 100 % of the
+# `ci` profile's 90 examples (30 for float32) on every family (`pytest -m slow
+# -rP tests/test_properties.py` prints the rates); 95 % leaves room for the
+# `long` profile's random draws. On closed meshes it always continues.
+LASER_RATE = {"sphere": 1.0, "patch": 0.95, "tent": 0.95, "patch32": 0.95}
 EXACT_RATE = {"sphere": 1.0, "patch": 1.0, "tent": 1.0, "patch32": 1.0}
 KEYS = {
     "sphere": mesh_keys("sphere", 0.15, 0.02),
