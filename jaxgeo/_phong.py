@@ -22,10 +22,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-#: Gauss–Legendre nodes and weights on [0, 1], by number of points. numpy, not
-#: jnp: this module is first imported inside the jitted solver (`Smooth.solve`
-#: imports `jaxgeo.smooth` lazily), where a jnp constant made at import time
-#: would be a tracer of that trace, leaked into every later call.
+#: Gauss–Legendre nodes and weights on [0, 1], by number of points. numpy, not jax
+#: arrays: this module is first imported inside a jit trace (`methods.Smooth.solve`
+#: imports `smooth` lazily), where a module-level `jnp.asarray` would be a tracer
+#: that leaks into every later trace (UnexpectedTracerError).
 _GAUSS = {
     n: (
         0.5 * (np.polynomial.legendre.leggauss(n)[0] + 1.0),

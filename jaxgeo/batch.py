@@ -1,11 +1,12 @@
 """Many geodesics at once: `shortest_paths`, chunked, vmapped and sharded.
 
 A batch of endpoint pairs is cut into chunks of a fixed size (the last one padded),
-so every chunk has the same shape and the solver compiles once. Each chunk runs
-through the same pipeline as a single path (`geodesic.solve`), its pairs as lanes
-of one compiled loop. With several devices, each chunk's batch
-axis is split across them with `jax.sharding` (the mesh is replicated); the chunk
-size is rounded up to a multiple of the device count.
+so every chunk has the same shape and the solver compiles once; a batch smaller
+than a chunk gets the next power of two ≥ its size instead (`chunk_size_for`).
+Each chunk runs through the same pipeline as a single path (`geodesic.solve`), its
+pairs as lanes of one compiled loop. With several devices, each chunk's batch axis
+is split across them with `jax.sharding` (the mesh is replicated); the chunk size
+is rounded up to a multiple of the device count.
 """
 
 from __future__ import annotations
@@ -101,6 +102,14 @@ def _device_sharding() -> NamedSharding | None:
     return NamedSharding(grid, PartitionSpec("batch"))
 
 
+def chunk_size_for(n: int, chunk_size: int) -> int:
+    """The chunk size for a batch of `n` pairs: `chunk_size`, or for a smaller
+    batch the next power of two ≥ `n` (capped at `chunk_size`), so that a small
+    batch does not solve `chunk_size` lanes of padding and the compiled sizes stay
+    a small set (1, 2, 4, …, `chunk_size`)."""
+    return min(chunk_size, 1 << max(n - 1, 0).bit_length())
+
+
 def shortest_paths(
     mesh: Mesh,
     p1: ArrayLike,
@@ -122,8 +131,10 @@ def shortest_paths(
     **Arguments:** as `shortest_path`, and
 
     - `chunk_size`: pairs solved per compiled call (bounds memory: about
-      `chunk_size · max_points` path entries at a time). Repeated calls with the
-      same `chunk_size` and options do not recompile, whatever N is.
+      `chunk_size · max_points` path entries at a time). A batch smaller than
+      `chunk_size` runs in one chunk of the next power of two ≥ N instead. Repeated
+      calls with the same options compile at most once per size 1, 2, 4, …,
+      `chunk_size`, whatever N is.
     - `shard`: split each chunk across all devices (`jax.devices()`) when there are
       several.
     - `throw`: raise `JaxgeoError` naming the failed rows, once the whole batch
@@ -152,6 +163,7 @@ def shortest_paths(
         raise JaxgeoError("empty batch: p1 and p2 have no rows")
     if jax.process_count() > 1:
         _check_same_on_all_processes(mesh, a, b)
+    chunk_size = chunk_size_for(n, chunk_size)
     sharding = _device_sharding() if shard else None
     if sharding is not None:
         n_dev = sharding.mesh.size

@@ -56,6 +56,42 @@ def test_new_batch_sizes_do_not_recompile(caplog):
     assert not compiles, [r.getMessage()[:120] for r in compiles]
 
 
+def test_chunk_size_from_the_batch():
+    """A batch smaller than `chunk_size` runs in a chunk of the next power of two
+    ≥ its size (capped at `chunk_size`): the compiled sizes are 1, 2, 4, …"""
+    from jaxgeo.batch import chunk_size_for
+
+    assert [chunk_size_for(n, 256) for n in (1, 2, 3, 4, 5, 30, 129, 256)] == [
+        1, 2, 4, 4, 8, 32, 256, 256
+    ]  # fmt: skip
+    assert chunk_size_for(10**6, 256) == 256
+    assert chunk_size_for(70, 100) == 100  # capped, also when not a power of two
+    sizes = {chunk_size_for(n, 256) for n in range(1, 1000)}
+    assert sizes == {2**k for k in range(9)}
+
+
+def test_small_batch_does_not_pay_for_the_padding(caplog):
+    """3 pairs with the default `chunk_size` (256) run as one chunk of 4: the
+    executable compiled for `chunk_size=4` is reused (no compile), and the rows
+    equal the padded run's (a 4-chunk with 1 padded lane, and the second chunk of a
+    batch of 7 in chunks of 4, 3 padded lanes) bit for bit: lanes are independent."""
+    p1, p2 = _pairs(7, 0)
+    padded = jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128)
+    with jax.log_compiles(True), caplog.at_level(logging.WARNING):
+        caplog.clear()
+        head = jg.shortest_paths(MESH, p1[:3], p2[:3], max_points=128)
+        tail = jg.shortest_paths(MESH, p1[4:], p2[4:], max_points=128)
+    compiles = [r for r in caplog.records if "Compiling" in r.getMessage()]
+    assert not compiles, [r.getMessage()[:120] for r in compiles]
+    assert head.points.shape == (3, 128, 3)
+    for got, rows in ((head, slice(0, 3)), (tail, slice(4, 7))):
+        for want, have in zip(
+            jax.tree.leaves(jax.tree.map(lambda x, r=rows: x[r], padded)),
+            jax.tree.leaves(got),
+        ):
+            np.testing.assert_array_equal(have, want)
+
+
 def test_bad_batches_raise():
     p1, p2 = _pairs(3, 2)
     with pytest.raises(jg.JaxgeoError, match="same shape"):

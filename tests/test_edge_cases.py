@@ -8,6 +8,9 @@ Almost every mesh here has the topology of `surfaces.saddle(6)` (a 7 × 7 vertex
 grid over [-1, 1]², h = 1/3), with the vertices moved: flat, a saddle, needles, an
 annulus sector. Same array shapes, so the solver compiles once for all of them;
 the float32 and `max_points=4` tests each add one compile.
+
+The fast set runs the argument checks (no compile) and the paths on the flat
+grid with the default options (one compile); the rest is slow.
 """
 
 from __future__ import annotations
@@ -24,9 +27,6 @@ from jaxgeo import surfaces
 from jaxgeo.path import VERTEX
 
 from .helpers import unit_icosphere
-
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
 
 geodesic = pytest.importorskip("pygeodesic.geodesic")
 
@@ -212,6 +212,7 @@ def test_with_vertices_bad_values_raise_at_use():
         FLAT.with_vertices(V(FLAT).T)
 
 
+@pytest.mark.slow
 def test_nan_point_is_infinitely_far_under_jit():
     """Under jit the eager checks cannot run: `locate` must put a NaN point at an
     infinite distance (so `shortest_path` reports FAR_FROM_SURFACE), never at
@@ -244,6 +245,7 @@ def test_identical_endpoints_give_length_zero(where):
     assert int(path.count) == 2 and float(path.length) == 0.0
 
 
+@pytest.mark.slow  # a SurfacePoint endpoint: a solver compile of its own
 def test_identical_surface_points_give_length_zero():
     sp = jg.SurfacePoint(jnp.asarray(5), jnp.array([0.0, 0.0, 1.0]))
     assert float(ok(jg.shortest_path(FLAT, sp, sp)).length) == 0.0
@@ -285,6 +287,7 @@ def test_path_along_a_straight_boundary():
     np.testing.assert_allclose(path.polyline()[:, 1], -1.0, atol=1e-14)  # y = -1
 
 
+@pytest.mark.slow
 def test_path_through_vertices_on_a_symmetric_diagonal():
     """The diagonal of the grid runs exactly through vertices (and along the
     diagonal edges of half the cells): crossings at u = 0 or 1 snap to vertices."""
@@ -302,6 +305,7 @@ def test_path_through_vertices_on_a_symmetric_diagonal():
     assert vid(3, 3) in elems[kinds == VERTEX]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "i, j",
     [(vid(0, 3), vid(6, 3)), (vid(3, 0), vid(3, 6)), (vid(1, 1), vid(5, 5))],
@@ -315,6 +319,7 @@ def test_saddle_where_zeta_changes_sign(i, j):
     assert d * (1 - 1e-9) <= float(path.length) <= d * (1 + 1e-3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("squeeze", [1e-3, 1e-6])
 def test_needle_triangles(squeeze):
     """x squeezed by 1e-6: every triangle is a needle of aspect ratio ~1e6 (the
@@ -329,6 +334,7 @@ def test_needle_triangles(squeeze):
         assert float(path.length) == pytest.approx(np.linalg.norm(b - a), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_curved_needles():
     mesh = grid(lambda x, y: 0.3 * np.sin(3 * y), squeeze=1e-4)
     i, j = vid(0, 0), vid(6, 6)
@@ -337,6 +343,7 @@ def test_curved_needles():
     assert d * (1 - 1e-9) <= float(path.length) <= d * (1 + 1e-3)
 
 
+@pytest.mark.slow
 def test_path_around_the_inside_of_an_annulus_sector():
     """Half an annulus: the chord between the inner tips crosses the empty middle,
     so the trace slides along the inner boundary; that is the exact polyhedral
@@ -355,6 +362,7 @@ def _tent():
     return jg.Mesh(*surfaces.cone_tent(n_around=12, n_radial=4))  # as test_properties
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [3, 6])
 def test_paths_across_the_hole_of_a_tent(k):
     """Cone tent: a membrane with a hole (its inner ring). Between inner-ring
@@ -369,6 +377,7 @@ def test_paths_across_the_hole_of_a_tent(k):
     assert np.all(np.hypot(pts[:, 0], pts[:, 1]) >= 0.15 * (1 - 1e-12))  # not inside
 
 
+@pytest.mark.slow
 def test_float32_matches_float64():
     """float32 meshes work; lengths agree with float64 to the accuracy documented
     in docs/accuracy.md (here ~1e-7 relative, bound 1e-5)."""
@@ -388,6 +397,7 @@ def test_float32_matches_float64():
         np.testing.assert_allclose(float(p32.length), float(p64.length), rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_identical_endpoints_on_a_closed_mesh():
     mesh = unit_icosphere(2)  # shares its compile with test_locate
     p = np.asarray(mesh.vertices)[17]
@@ -398,6 +408,7 @@ def test_identical_endpoints_on_a_closed_mesh():
 # ---------------------------------------------------------- item 3: statuses
 
 
+@pytest.mark.slow
 def test_out_of_steps_is_a_status_and_raises():
     v = V(SADDLE)
     with pytest.raises(jg.JaxgeoError, match="out of steps"):
@@ -414,6 +425,7 @@ def test_out_of_steps_is_a_status_and_raises():
     assert np.linalg.norm(path.polyline()[-1] - v[vid(6, 6)]) > 0.5
 
 
+@pytest.mark.slow
 def test_no_crossing_is_a_status_and_raises():
     """Three quarters of an annulus: from an inner tip the chord to the other tip
     leaves the mesh, and neither boundary edge at the tip points ahead (the

@@ -33,9 +33,6 @@ from jaxgeo import surfaces
 from jaxgeo.path import EDGE, VERTEX
 from jaxgeo.replay import replay
 
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
-
 N_AROUND, N_RINGS = 24, 10  # 480 faces
 MAX_POINTS = 64
 H = 1e-6  # finite-difference step
@@ -195,6 +192,40 @@ def contract(jacobian, direction):
 # ------------------------------------------------------------------------- tests
 
 
+@pytest.mark.parametrize("name", ["sphere", "cone"])
+def test_grad_of_path_length_on_the_shared_connectivity(name):
+    """The fast set's part: `jax.grad` of `path_length` w.r.t. the vertices and
+    the start's barycentrics, against central differences, on the sphere zone and
+    the cone tent. The same function, connectivity and `max_points` (256) as
+    tests/test_exact.py's gradient test on the catenoid, so the compiled
+    derivative is shared; tolerance as in the module docstring, plus 1e-9
+    absolute for derivatives near zero (roundoff of the differences)."""
+    from jaxgeo.locate import SurfacePoint
+
+    mesh = ring_mesh(name)
+    faces = np.asarray(mesh.faces)
+    end = SurfacePoint(
+        jnp.asarray(int(faces.shape[0] * 0.6)), jnp.asarray([0.3, 0.3, 0.4])
+    )
+    face = jnp.asarray(3)
+
+    def length(vertices, bary):
+        m = mesh.with_vertices(vertices)
+        return jg.path_length(m, SurfacePoint(face, bary), end, max_points=256)
+
+    v0, b0 = mesh.vertices, jnp.asarray([0.2, 0.5, 0.3])
+    gv, gb = jax.grad(length, argnums=(0, 1))(v0, b0)
+    moving = np.abs(np.asarray(gv)).sum(1) > 0
+    assert moving.sum() >= 6  # the path crosses several faces
+    for d in directions(v0.shape, seed=1, support=moving)[:3]:
+        fd = float(central_difference(lambda v: length(v, b0), v0, jnp.asarray(d)))
+        assert abs(fd - float(jnp.sum(gv * d))) <= RTOL * abs(fd) + 1e-9
+    db = jnp.asarray([1.0, -1.0, 0.0]) / np.sqrt(2)
+    fd = float(central_difference(lambda b: length(v0, b), b0, db))
+    assert abs(fd - float(gb @ db)) <= RTOL * abs(fd) + 1e-9
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_grad_and_jvp_with_3d_endpoints(name):
     """`jax.grad` w.r.t. the vertices and each 3-D endpoint, and `jax.jvp` along
@@ -231,6 +262,7 @@ def test_grad_and_jvp_with_3d_endpoints(name):
     assert max(worst.values()) <= RTOL, worst
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_jacrev_with_barycentric_endpoints(name):
     """`jax.jacrev` of the length and of every point of the path w.r.t. the
@@ -270,6 +302,7 @@ def test_jacrev_with_barycentric_endpoints(name):
     assert max(worst.values()) <= RTOL, worst
 
 
+@pytest.mark.slow
 def test_vmap_of_gradient_equals_single_gradients():
     mesh = ring_mesh("catenoid")
     rng = np.random.default_rng(8)
@@ -291,6 +324,7 @@ def test_vmap_of_gradient_equals_single_gradients():
 MERIDIAN = (2 * N_AROUND + 3, 8 * N_AROUND + 3)
 
 
+@pytest.mark.slow
 def test_gradient_finite_through_a_vertex_under_jit():
     """Two vertices on one meridian of the catenoid, six rings apart: by symmetry
     the path alternates between the midpoint of an edge and a mesh vertex, where
@@ -319,6 +353,7 @@ def test_gradient_finite_through_a_vertex_under_jit():
     assert all(np.isfinite(g).all() for g in (*dlength, *dpoints))
 
 
+@pytest.mark.slow
 def test_gradient_finite_through_a_vertex_eager():
     mesh = ring_mesh("catenoid")
     p1, p2 = np.asarray(mesh.vertices)[list(MERIDIAN)]
@@ -328,14 +363,25 @@ def test_gradient_finite_through_a_vertex_eager():
     assert jnp.isfinite(grad).all() and jnp.abs(grad).max() > 0
 
 
+@pytest.mark.slow
 def test_incomplete_path_replays_its_last_crossing():
     """A path that stopped early (here a complete one cut to 5 points and marked
     MAX_STEPS) ends at its last crossing, not at point 2: the replay re-solves
-    that crossing instead of putting point 2 there."""
+    that crossing instead of putting point 2 there.
+
+    `replay` is the laser's (it re-solves each crossing by the ray's equations),
+    so the path is the laser's: the exact default's crossings lie on the
+    straightened geodesic, not on the ray, and do not replay."""
     mesh = ring_mesh("catenoid")
     (f1, f2), (b1, b2), _ = endpoint_pair("catenoid")
-    v0 = np.asarray(mesh.vertices)
-    path = bary_jacobians(v0, mesh, f1, b1, f2, b2)[1]
+    path = jg.shortest_path(
+        mesh,
+        jg.SurfacePoint(jnp.asarray(f1), jnp.asarray(b1)),
+        jg.SurfacePoint(jnp.asarray(f2), jnp.asarray(b2)),
+        method="laser",
+        max_points=MAX_POINTS,
+    )
+    assert int(path.status) == 0 and int(path.count) > 5
     cut = eqx.tree_at(
         lambda p: (p.count, p.status),
         path,
@@ -350,6 +396,7 @@ def test_incomplete_path_replays_its_last_crossing():
     np.testing.assert_allclose(replayed.length, np.linalg.norm(segments, axis=1).sum())
 
 
+@pytest.mark.slow
 def test_gradient_finite_for_coincident_endpoints():
     """Zero length: the norm of a zero segment must not give a NaN gradient."""
     mesh = ring_mesh("catenoid")

@@ -15,9 +15,6 @@ from jaxgeo import surfaces
 
 from .helpers import face_points, position, unit_icosphere
 
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
-
 geodesic = pytest.importorskip("pygeodesic.geodesic")
 
 N = 12  # grid cells per side of the flat domains (h = 1/6 on [-1, 1]²)
@@ -82,6 +79,7 @@ def laser(v, f, a, b, **kw) -> jg.Path:
 FLAT_RTOL = 1e-12
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "start, end, expected",
     [
@@ -106,6 +104,7 @@ def test_flat_square_with_a_hole(start, end, expected):
     assert not inside.any()
 
 
+@pytest.mark.slow
 def test_l_shaped_domain_wraps_the_reflex_corner():
     """The chord passes over the missing quadrant; the path is the two segments
     through the inner corner (was 4 % long: a slide from where the chord left)."""
@@ -122,6 +121,7 @@ def test_l_shaped_domain_wraps_the_reflex_corner():
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("on_rim", [False, True])
 def test_sphere_with_a_hole(on_rim):
     """Endpoints on either side of a polar hole: the path slides round the rim.
@@ -157,6 +157,7 @@ def _transform_rtol(translation: float, size: float) -> float:
     return 1e3 * EPS * max(translation / size, 1.0)
 
 
+@pytest.mark.slow
 def test_icosphere_at_site_coordinates_traces_as_at_the_origin():
     m = unit_icosphere(2)
     v, f = np.asarray(m.vertices), np.asarray(m.faces)
@@ -180,6 +181,7 @@ def test_icosphere_at_site_coordinates_traces_as_at_the_origin():
             )
 
 
+@pytest.mark.slow
 @settings(max_examples=20, deadline=None)
 @given(
     seed=st.integers(0, 2**31 - 1),
@@ -219,6 +221,26 @@ def test_translated_and_scaled_meshes_give_the_same_paths(seed, transform):
                 p1.polyline(), move(p0.polyline()), rtol=rtol, atol=rtol * size * unit
             )
         assert ok >= 3
+
+
+def test_builtin_catenoid_at_site_coordinates_traces_as_at_the_origin():
+    """The fast set's part: the built-in catenoid moved by 1e5 (site coordinates
+    in metres) gives the laser path at the origin, moved, to the rounding of the
+    moved input (`_transform_rtol`). Same shapes and options as tests/test_cli.py's
+    laser run on it: no compile of its own."""
+    mesh = jg.Mesh(*surfaces.catenoid())
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    a, b = v[100], v[-200]
+    offset = 1e5
+    p0 = laser(v, f, a, b)
+    p1 = laser(v + offset, f, a + offset, b + offset)
+    assert int(p0.status) == int(p1.status) == jg.Status.SUCCESS
+    size = float(np.max(np.ptp(v, axis=0)))
+    rtol = _transform_rtol(offset, size)
+    assert float(p1.length) == pytest.approx(float(p0.length), rel=rtol)
+    np.testing.assert_allclose(
+        p1.polyline() - offset, p0.polyline(), rtol=0, atol=rtol * size
+    )
 
 
 @functools.cache

@@ -9,9 +9,6 @@ from jaxgeo.locate import snap
 
 from .helpers import unit_icosphere
 
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
-
 MESH = unit_icosphere(2)
 
 
@@ -27,6 +24,7 @@ def test_locate_recovers_face_and_barycentrics():
         assert float(dist) < 1e-12
 
 
+@pytest.mark.slow
 def test_locate_equals_brute_force_near_and_far_under_vmap():
     """The pruned search (bounding spheres) and its full-search fallback find the
     brute-force nearest distance, on a face that realises it (faces tied to
@@ -83,6 +81,7 @@ def test_far_point_raises_and_names_the_distance():
         jg.shortest_path(MESH, np.array([0.0, 0.0, 3.0]), np.array([1.0, 0, 0]))
 
 
+@pytest.mark.slow
 def test_far_point_under_jit_is_a_status():
     import jax
 
@@ -92,6 +91,7 @@ def test_far_point_under_jit_is_a_status():
     assert int(lengths_status) == jg.Status.FAR_FROM_SURFACE
 
 
+@pytest.mark.slow  # a mesh of its own (two spheres): compiles
 def test_points_on_different_components_raise():
     v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
     two = jg.Mesh(np.vstack([v, v + [5.0, 0, 0]]), np.vstack([f, f + len(v)]))

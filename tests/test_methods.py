@@ -12,9 +12,6 @@ import jaxgeo as jg
 from jaxgeo import surfaces
 from jaxgeo.validation import catenoid_geodesic_length
 
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
-
 
 @functools.cache
 def catenoid():
@@ -28,12 +25,12 @@ def _vertex_pairs(v, n, seed):
     return [(int(rng.choice(low)), int(rng.choice(high))) for _ in range(n)]
 
 
-def test_exact_is_never_longer_than_laser_and_matches_mmp():
+def _exact_never_longer_than_laser_and_matches_mmp(n_pairs: int):
     geodesic = pytest.importorskip("pygeodesic.geodesic")
     mesh = catenoid()
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     mmp = geodesic.PyGeodesicAlgorithmExact(v, f)
-    for i, j in _vertex_pairs(v, 6, seed=0):
+    for i, j in _vertex_pairs(v, n_pairs, seed=0):
         laser = jg.shortest_path(mesh, v[i], v[j], method="laser")
         exact = jg.shortest_path(mesh, v[i], v[j], method="exact")
         d = mmp.geodesicDistance(i, j)[0]
@@ -50,6 +47,19 @@ def test_exact_is_never_longer_than_laser_and_matches_mmp():
         assert abs(seg - float(exact.length)) <= 1e-12 * seg
 
 
+def test_exact_is_never_longer_than_laser_and_matches_mmp_one_pair():
+    """The fast set's part: one pair, with the default options on the built-in
+    catenoid, which tests/test_cli.py's `jaxgeo path` runs with both methods (the
+    compiled solvers are shared)."""
+    _exact_never_longer_than_laser_and_matches_mmp(1)
+
+
+@pytest.mark.slow
+def test_exact_is_never_longer_than_laser_and_matches_mmp():
+    _exact_never_longer_than_laser_and_matches_mmp(6)
+
+
+@pytest.mark.slow
 def test_exact_and_smooth_under_jit_vmap_and_grad():
     mesh = catenoid()
     f0, f1 = 100, 3000
@@ -83,6 +93,7 @@ def test_exact_and_smooth_under_jit_vmap_and_grad():
             )
 
 
+@pytest.mark.slow
 def test_smooth_is_closer_to_the_analytic_catenoid_than_exact():
     """Interior endpoints of the catenoid (mesh vertices lie on the surface, so the
     analytic geodesic applies): the Phong-surface geodesic beats the flat one."""

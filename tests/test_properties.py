@@ -15,8 +15,14 @@ Endpoints are drawn as vertices (so the exact polyhedral geodesic of pygeodesic,
 test-only, is a lower bound), points inside faces and points on edges, including
 boundary edges.
 
-Profiles (`tests/conftest.py`): `ci` (default) runs ≥ 200 examples in all;
-`HYPOTHESIS_PROFILE=long pytest tests/test_properties.py` runs 20× more.
+Every test asserts a success rate besides the invariants of each path (a test
+whose paths all failed would otherwise pass: `check_path` checks only the status
+of a failed path): the exact default succeeds on every pair; the laser on closed
+meshes too, on open ones at a stated rate (`LASER_RATE`).
+
+Profiles (`tests/conftest.py`): `ci` (default) runs 90 examples per family and
+method; `HYPOTHESIS_PROFILE=long pytest -m slow tests/test_properties.py` runs
+20× more. The fast set runs `test_perturbed_sphere_few_examples` only.
 """
 
 from __future__ import annotations
@@ -29,12 +35,8 @@ from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import jaxgeo as jg
 from jaxgeo import surfaces
-from jaxgeo.geodesic import METHODS
 from jaxgeo.path import EDGE, FACE, VERTEX
 from jaxgeo.projection import param_tolerance
-
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
 
 geodesic = pytest.importorskip("pygeodesic.geodesic")
 
@@ -222,13 +224,15 @@ def check_path(mesh: jg.Mesh, a, b, path: jg.Path, exact: float | None) -> None:
         assert length >= exact * (1 - rel) - tol, f"below the exact {exact}"
 
 
-def solve_and_check(mesh_key, e1, e2, method="laser"):
+def solve_and_check(mesh_key, e1, e2, method, max_points=1024):
     mesh = make_mesh(mesh_key)
     a, i = endpoint(mesh, *e1)
     b, j = endpoint(mesh, *e2)
     dtype = np.asarray(mesh.vertices).dtype
     a, b = a.astype(dtype).astype(np.float64), b.astype(dtype).astype(np.float64)
-    path = jg.shortest_path(mesh, a, b, method=method, throw=False)
+    path = jg.shortest_path(
+        mesh, a, b, method=method, throw=False, max_points=max_points
+    )
     exact = None
     if i is not None and j is not None:
         exact = float(exact_solver(mesh_key).geodesicDistance(i, j)[0])
@@ -258,33 +262,81 @@ def mesh_keys(family: str, amplitude: float, noise: float):
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
-@settings(**SETTINGS)
-@given(mesh_keys("sphere", 0.15, 0.02), endpoints, endpoints)
-def test_perturbed_sphere(mesh_key, e1, e2):
-    solve_and_check(mesh_key, e1, e2)
+def success_rate(
+    keys, method: str, max_points: int = 1024, **settings_kw
+) -> tuple[float, int]:
+    """Run hypothesis over (mesh key, endpoint, endpoint) draws from `keys`: every
+    path must satisfy `check_path`'s invariants (a failure raises, shrunk), and the
+    fraction of them that SUCCEED is returned with the number of examples, for the
+    caller to assert: a property test that passed on failed paths alone would say
+    nothing (`check_path` checks only the status of a failed path)."""
+    outcomes = []
+
+    @settings(**SETTINGS, **settings_kw)
+    @given(keys, endpoints, endpoints)
+    def run(mesh_key, e1, e2):
+        path = solve_and_check(mesh_key, e1, e2, method, max_points)
+        outcomes.append(int(path.status) == jg.Status.SUCCESS)
+
+    run()
+    return float(np.mean(outcomes)), len(outcomes)
 
 
-@settings(**SETTINGS)
-@given(mesh_keys("patch", 0.6, 0.05), endpoints, endpoints)
-def test_height_patch(mesh_key, e1, e2):
-    solve_and_check(mesh_key, e1, e2)
+def assert_rate(
+    keys, method: str, at_least: float, max_points: int = 1024, **settings_kw
+) -> None:
+    rate, n = success_rate(keys, method, max_points, **settings_kw)
+    print(f"{method}: {rate:.1%} of {n} paths succeeded")  # shown with -s / -rP
+    wanted = settings_kw.get("max_examples", settings().max_examples)
+    # hypothesis may stop early when it runs out of distinct examples; not here
+    assert n >= min(wanted, 10), f"only {n} examples ran"
+    assert rate >= at_least, f"{rate:.0%} of {n} paths succeeded, want ≥ {at_least:.0%}"
 
 
-@settings(**SETTINGS)
-@given(mesh_keys("tent", 0.5, 0.03), endpoints, endpoints)
-def test_tent(mesh_key, e1, e2):
-    solve_and_check(mesh_key, e1, e2)
+# Success rates. The exact method succeeds on every pair of a connected mesh,
+# closed or open (its corridors come from the mesh graph, not from a ray).
+# The laser ray (the paper's method) may stop with NO_CROSSING where the chord's
+# projection leaves an open mesh (a concave boundary ahead) and cannot slide on,
+# so on patches and tents the rate is stated, not total: measured 100 % of the
+# `ci` profile's 90 examples (30 for float32) on every family (`pytest -m slow
+# -rP tests/test_properties.py` prints the rates); 95 % leaves room for the
+# `long` profile's random draws. On closed meshes it always continues.
+LASER_RATE = {"sphere": 1.0, "patch": 0.95, "tent": 0.95, "patch32": 0.95}
+EXACT_RATE = {"sphere": 1.0, "patch": 1.0, "tent": 1.0, "patch32": 1.0}
+KEYS = {
+    "sphere": mesh_keys("sphere", 0.15, 0.02),
+    "patch": mesh_keys("patch", 0.6, 0.05),
+    "tent": mesh_keys("tent", 0.5, 0.03),
+    "patch32": mesh_keys("patch32", 0.6, 0.05),
+}
 
 
-@settings(**SETTINGS, max_examples=max(settings().max_examples // 3, 10))
-@given(mesh_keys("patch32", 0.6, 0.05), endpoints, endpoints)
-def test_height_patch_float32(mesh_key, e1, e2):
+def test_perturbed_sphere_few_examples():
+    """The fast set's property test: 8 perturbed spheres and endpoint pairs, the
+    default method, all succeed. `max_points=128` on the 162-vertex icosphere: the
+    solver tests/test_batch.py compiles (one compile shared)."""
+    assert_rate(KEYS["sphere"], "exact", 1.0, max_points=128, max_examples=8)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["exact", "laser"])
+@pytest.mark.parametrize("family", ["sphere", "patch", "tent"])
+def test_family(family, method):
+    rates = EXACT_RATE if method == "exact" else LASER_RATE
+    assert_rate(KEYS[family], method, rates[family])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["exact", "laser"])
+def test_height_patch_float32(method):
     """float32 meshes: the same invariants to float32 tolerances (1e-5 of the
     mesh scale; endpoints snapped within 1e-4)."""
-    solve_and_check(mesh_key, e1, e2)
+    rates = EXACT_RATE if method == "exact" else LASER_RATE
+    n = max(settings().max_examples // 3, 10)
+    assert_rate(KEYS["patch32"], method, rates["patch32"], max_examples=n)
 
 
-@pytest.mark.skipif("exact" not in METHODS, reason="method 'exact' not wired yet")
+@pytest.mark.slow
 @settings(**SETTINGS)
 @given(
     st.one_of(
@@ -311,6 +363,8 @@ def test_height_patch_float32(mesh_key, e1, e2):
 def test_exact_method_is_symmetric(mesh_key, e1, e2):
     forward = solve_and_check(mesh_key, e1, e2, method="exact")
     backward = solve_and_check(mesh_key, e2, e1, method="exact")
+    # the success rate: all, on every family (EXACT_RATE)
+    assert int(forward.status) == int(backward.status) == jg.Status.SUCCESS
     mesh = make_mesh(mesh_key)
     v = np.asarray(mesh.vertices, np.float64)
     edges = np.asarray(mesh.edges)
@@ -319,13 +373,10 @@ def test_exact_method_is_symmetric(mesh_key, e1, e2):
     # it (see check_path), so the laser path may start and end that much closer
     snap = param_tolerance(v.dtype) * longest
     for path, (p, q) in ((forward, (e1, e2)), (backward, (e2, e1))):
-        laser = solve_and_check(mesh_key, p, q)
+        laser = solve_and_check(mesh_key, p, q, "laser")
         if int(path.status) == int(laser.status) == jg.Status.SUCCESS:
             # the refinement starts from the laser path's corridor and only ever
             # shortens it: never longer, up to rounding and the two snaps
             bound = float(laser.length) * (1 + 1e-12) + 2 * snap
             assert float(path.length) <= bound
-    if int(forward.status) == int(backward.status) == jg.Status.SUCCESS:
-        np.testing.assert_allclose(
-            float(forward.length), float(backward.length), rtol=1e-9
-        )
+    np.testing.assert_allclose(float(forward.length), float(backward.length), rtol=1e-9)

@@ -1,5 +1,9 @@
 """Geodesics on the Phong tessellation (`jaxgeo.smooth`, `jaxgeo._phong`).
 
+The surface's formulas run in the fast set (eager, small arrays); every smooth
+path compiles the exact and the smooth solvers (about a minute), so those tests
+are slow.
+
 Acceptance (issue 9): on the validation suites' vertex pairs the smooth geodesic's
 median |relative error| against the analytic length is ≤ 1e-5 on the 5,120-face
 icosphere (and ≥ 50× below the exact polyhedral geodesic's) and ≤ 1e-6 on the
@@ -30,9 +34,6 @@ from jaxgeo.smooth import (
 )
 from jaxgeo.surfaces import icosphere
 
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
-
 CAPACITY = 256  # one compiled shape for every path of a mesh
 
 
@@ -56,6 +57,25 @@ def _smooth(mesh: Mesh, start: SurfacePoint, end: SurfacePoint, **options):
 
 
 # --------------------------------------------------------------------------- surface
+
+
+def test_no_module_holds_a_jax_array():
+    """A module first imported inside a jit trace (`methods.Smooth.solve` imports
+    `smooth` lazily) must not create jax arrays at import: they would be tracers,
+    leaked into every later trace (`_phong._GAUSS` did: UnexpectedTracerError in
+    `jit(path_length(method="smooth"))` when nothing had imported it before)."""
+    import importlib
+    import pkgutil
+
+    held = []
+    for info in pkgutil.walk_packages(jaxgeo.__path__, "jaxgeo."):
+        if info.name.endswith("__main__"):
+            continue
+        module = importlib.import_module(info.name)
+        for name, value in vars(module).items():
+            if any(isinstance(x, jax.Array) for x in jax.tree.leaves(value)):
+                held.append(f"{info.name}.{name}")
+    assert not held
 
 
 def test_phong_edge_curve_depends_on_edge_only():
@@ -117,6 +137,7 @@ def sphere():
     return suite, Mesh(suite.vertices, suite.faces)
 
 
+@pytest.mark.slow
 def test_sphere_acceptance(sphere):
     """5,120-face icosphere: median |rel. error| ≤ 1e-5 and ≥ 50× below MMP."""
     pygeodesic = pytest.importorskip("pygeodesic.geodesic")
@@ -137,6 +158,7 @@ def test_sphere_acceptance(sphere):
     assert med_smooth * 50 <= med_exact
 
 
+@pytest.mark.slow
 def test_catenoid_acceptance():
     """Catenoid (6,144 faces, the suite's level 4: the nearest to issue 9's "about
     4,000"), the suite's 13 pairs, through `shortest_path(method="smooth")` with
@@ -158,6 +180,7 @@ def test_catenoid_acceptance():
     assert np.median(np.abs(err)) <= 1e-6
 
 
+@pytest.mark.slow
 def test_shortest_path_smooth_repairs_with_the_requested_weighting():
     """`shortest_path(method="smooth", normals="angle")` repairs the strip and
     solves on the same (angle-weighted, boundary-fitted) surface: its length is the
@@ -174,6 +197,7 @@ def test_shortest_path_smooth_repairs_with_the_requested_weighting():
         np.testing.assert_allclose(float(path.length), float(want.length), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_converges_when_the_path_grazes_vertices():
     """Sphere suite level 6 (81,920 faces), pair S3: a great circle along mesh
     edges, whose smooth geodesic passes ~1e-8 from vertices. There the Hessian is
@@ -211,6 +235,7 @@ def test_phong_normals_boundary_option():
 # --------------------------------------------------------------------------- gradients
 
 
+@pytest.mark.slow
 def test_gradient_matches_central_differences(sphere):
     """dL/d(vertices) and dL/d(endpoint barycentrics) by the envelope theorem vs
     central differences (step 1e-6) on a fixed strip, path away from vertices."""

@@ -11,9 +11,6 @@ from jaxgeo import cli, validation
 from jaxgeo._errors import JaxgeoError
 from jaxgeo.surfaces import catenoid_parameter
 
-# Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
-pytestmark = pytest.mark.slow
-
 RES = 3
 #: The paper's sphere claim: the traced arc is within 0.5 % of the great circle.
 PAPER_SPHERE_TOL = 0.005
@@ -62,6 +59,34 @@ def test_resolution_checked():
         validation._exact_solver("mmp", np.eye(3), np.array([[0, 1, 2]]))
 
 
+def test_one_suite_row_with_the_default_method():
+    """The fast set's part: `run_suite` on the 320-face unit icosphere (two vertex
+    pairs, great-circle lengths) with the default method at default options, the
+    solver tests/test_cli.py and tests/test_locate.py compile on that shape. The
+    exact method is the polyhedral geodesic: its method error against MMP is
+    rounding (1e-9: the refinement's acceptance bound, tests/test_methods.py), and
+    the columns add up (total = method + discretisation, to rounding)."""
+    pytest.importorskip("pygeodesic.geodesic")
+    from jaxgeo.surfaces import icosphere
+
+    v, f = icosphere(2)
+    pairs = []
+    for k, (i, j) in enumerate([(0, 40), (5, 150)]):
+        arc = float(validation.great_circle_length(v[i], v[j]))
+        pairs.append(validation.Pair(f"S{k + 1}", "great circle", i, j, arc))
+    suite = validation.Suite("sphere", 2, v, f, tuple(pairs))
+    table = validation.run_suite(suite, ["exact"], exact_solver="pygeodesic")
+    assert [r.pair for r in table.rows] == ["S1", "S2"]
+    for r in table.rows:
+        assert r.results["exact"].status == "SUCCESS"
+        assert abs(r.method_error("exact")) <= 1e-9
+        total = r.method_error("exact") + r.discretisation_error
+        assert r.error("exact") == pytest.approx(total, rel=0, abs=1e-14)
+        # the polyhedral geodesic on an inscribed mesh is shorter than the arc
+        assert -0.05 < r.discretisation_error < 0
+
+
+@pytest.mark.slow
 def test_columns_are_consistent(table):
     cols = table.columns()
     n = len(table.rows)
@@ -88,6 +113,7 @@ def test_columns_are_consistent(table):
     assert all(t > 0 for t in cols["laser_time"])
 
 
+@pytest.mark.slow
 def test_sphere_within_the_papers_half_percent(table):
     rows = [r for r in table.rows if r.suite == "sphere"]
     for r in rows:
@@ -96,6 +122,7 @@ def test_sphere_within_the_papers_half_percent(table):
         assert abs(r.method_error("laser")) < 1e-4, r
 
 
+@pytest.mark.slow
 def test_catenoid_method_error_is_the_descent_curve(table):
     # the laser ray tends to the steepest-descent curve of |x − q|, not to the
     # geodesic: on the long arcs its length is far nearer to that curve's
@@ -111,6 +138,7 @@ def test_catenoid_method_error_is_the_descent_curve(table):
         assert abs(rows[pid].method_error("laser")) < 1e-6
 
 
+@pytest.mark.slow
 def test_markdown_and_csv(table, tmp_path):
     md = table.to_markdown()
     assert "| S6 | great circle 90° (Fig. 8)" in md
@@ -126,6 +154,7 @@ def test_markdown_and_csv(table, tmp_path):
     assert back.rows == table.rows  # floats written with repr: exact round trip
 
 
+@pytest.mark.slow
 def test_convergence_summary_and_plot(table, tmp_path):
     summary = validation.convergence_summary(table)
     assert [e["suite"] for e in summary] == ["sphere", "catenoid"]
@@ -155,6 +184,7 @@ def test_curves_end_at_the_points():
     np.testing.assert_allclose(pts[-1, 2], 0.5, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_cli_validate_writes_csv_and_markdown(table, tmp_path, capsys):
     # same meshes as the fixture: the compiled solver is reused
     out_csv, out_md = tmp_path / "v.csv", tmp_path / "v.md"
