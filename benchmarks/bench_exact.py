@@ -90,9 +90,13 @@ def bench(name: str, mesh: jg.Mesh, n_pairs: int, n_batch: int, seed: int) -> di
     rel_pp = (np.array(pp_len[:m]) - mmp) / mmp
     bp = rng.integers(0, mesh.n_vertices, (n_batch, 2))
     chunk = 256
-    jg.shortest_paths(mesh, v[bp[:chunk, 0]], v[bp[:chunk, 1]], chunk_size=chunk, throw=False)
+    jg.shortest_paths(
+        mesh, v[bp[:chunk, 0]], v[bp[:chunk, 1]], chunk_size=chunk, throw=False
+    )
     t0 = time.perf_counter()
-    batch = jg.shortest_paths(mesh, v[bp[:, 0]], v[bp[:, 1]], chunk_size=chunk, throw=False)
+    batch = jg.shortest_paths(
+        mesh, v[bp[:, 0]], v[bp[:, 1]], chunk_size=chunk, throw=False
+    )
     batch_s = time.perf_counter() - t0
     single = statistics.median(times)
     pp_single = statistics.median(pp_t)

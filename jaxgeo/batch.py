@@ -11,6 +11,7 @@ is rounded up to a multiple of the device count.
 
 from __future__ import annotations
 
+import itertools
 import zlib
 from collections.abc import Callable
 from typing import Literal
@@ -66,6 +67,25 @@ def _as_rows(mesh: Mesh, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if x.ndim == 1:
         return np.asarray(mesh.vertices)[x], x.astype(np.int32)
     return x, np.full(x.shape[0], -1, np.int32)
+
+
+#: How long a process waits for the others to finish compiling a chunk (ms).
+_BARRIER_MS = 30 * 60 * 1000
+
+
+_barriers = itertools.count()  # every process counts its calls alike
+
+
+def _wait_for_all_processes() -> None:
+    """A barrier through JAX's coordination service, before a collective. Gloo
+    gives a collective 30 s for every process to join, and a process may still be
+    compiling the solver long after another reached the gather (seen on 2 shared
+    cores: `Gloo context initialization failed: DEADLINE_EXCEEDED`)."""
+    from jax._src import distributed  # the barrier has no public API yet
+
+    client = distributed.global_state.client
+    if client is not None:
+        client.wait_at_barrier(f"jaxgeo-{next(_barriers)}", _BARRIER_MS)
 
 
 def _gather(x) -> np.ndarray:
@@ -188,6 +208,9 @@ def shortest_paths(
 
         def run(method, chunk=chunk, k=stop - start):
             paths = _solve_chunk(padded, *chunk, limit, method, max_points)
+            if jax.process_count() > 1:
+                jax.block_until_ready(paths)
+                _wait_for_all_processes()
             return jax.tree.map(lambda y: _gather(y)[:k], paths)
 
         # a cheaper first attempt where one exists; the chunk again with `m` if a

@@ -127,8 +127,11 @@ def test_numpy_integer_options_are_accepted():
         (np.array([1.0, 0.0, 0.0], complex), "dtype complex"),
         (None, "dtype object"),
         ("abc", "dtype <U3"),
-        (1.0, r"shape \(3,\), got \(\)"),
-        (np.zeros((1, 3)), r"shape \(3,\), got \(1, 3\)"),
+        (1.0, r"shape \(3,\), or an integer vertex index, got shape \(\)"),
+        (
+            np.zeros((1, 3)),
+            r"shape \(3,\), or an integer vertex index, got shape \(1, 3\)",
+        ),
         (np.array([0.0, 0.0, np.inf]), "NaN or infinite"),
     ],
 )

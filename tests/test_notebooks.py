@@ -42,6 +42,7 @@ def test_notebook_is_stored_with_outputs(path: Path):
             assert "image/png" in kinds, f"a figure is missing: {c.source[:60]!r}"
 
 
+@pytest.mark.long  # over ~10 min on 2 cores: by hand, `pytest -m long`
 @pytest.mark.slow
 @pytest.mark.parametrize("path", ALL, ids=lambda p: p.name)
 def test_notebook_runs(path: Path):

@@ -184,6 +184,7 @@ def test_cli_method_defaults_to_exact():
     assert args.method == "exact" and args.objective == "width"
 
 
+@pytest.mark.long  # over ~10 min on 2 cores: by hand, `pytest -m long`
 @pytest.mark.slow  # compiles the stress optimiser: minutes on 2 cores
 def test_cli_objective_stress_writes_the_report(tmp_path, capsys):
     import json

@@ -120,6 +120,7 @@ def test_setup_lines_run(workdir):
     assert any(workdir.iterdir())
 
 
+@pytest.mark.long  # over ~10 min on 2 cores: by hand, `pytest -m long`
 @pytest.mark.slow
 @pytest.mark.parametrize("line", [c for c in COMMANDS if not _is_setup(c)])
 def test_command_line_runs(line, workdir):
@@ -127,6 +128,7 @@ def test_command_line_runs(line, workdir):
     assert r.returncode == 0, f"{line}\nstdout:\n{r.stdout}\nstderr:\n{r.stderr}"
 
 
+@pytest.mark.long  # over ~10 min on 2 cores: by hand, `pytest -m long`
 @pytest.mark.slow
 def test_python_blocks_run(workdir):
     r = subprocess.run(
