@@ -186,8 +186,8 @@ def test_bad_batch_options_raise(kwargs, message):
 @pytest.mark.parametrize(
     "p1, message",
     [
-        (np.zeros(3), r"shape \(N, 3\), got \(3,\)"),
-        (np.zeros((1, 2, 3)), r"shape \(N, 3\), got \(1, 2, 3\)"),
+        (np.zeros(3), r"shape \(N, 3\), or vertex indices.*; got shape \(3,\)"),
+        (np.zeros((1, 2, 3)), r"shape \(N, 3\), or vertex .*; got shape \(1, 2, 3\)"),
         (np.zeros((0, 3)), "empty batch"),
         (np.array([["a", "b", "c"]]), "dtype <U1"),
         (np.zeros((1, 3), complex), "dtype complex128"),
