@@ -46,7 +46,7 @@ class Sleeve(eqx.Module):
     valid: Bool[Array, ""]
 
 
-def _cross(a, b):
+def cross2d(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
@@ -245,16 +245,16 @@ def funnel(
         # zero width, where rounding could let the sides swap (seen on the
         # catenoid: a path 5e-4 shorter than the exact one, outside its corridor).
         r_apex = ir == ai  # the new right point is the apex's vertex itself
-        r_tight = (ri == ai) | r_apex | (_cross(rp - ap, pr - ap) >= 0)
-        r_over = r_tight & ~r_apex & (li != ai) & (_cross(lp - ap, pr - ap) >= 0)
+        r_tight = (ri == ai) | r_apex | (cross2d(rp - ap, pr - ap) >= 0)
+        r_over = r_tight & ~r_apex & (li != ai) & (cross2d(lp - ap, pr - ap) >= 0)
         r_move = r_tight & ~r_over
         rp2 = jnp.where(r_move, pr, rp)
         ri2 = jnp.where(r_move, ir, ri)
         r_i2 = jnp.where(r_move, i, r_i)
         # the left side, unless the right restarted the funnel
         l_apex = il == ai
-        l_tight = ~r_over & ((li == ai) | l_apex | (_cross(lp - ap, pl - ap) <= 0))
-        l_over = l_tight & ~l_apex & (ri2 != ai) & (_cross(rp2 - ap, pl - ap) <= 0)
+        l_tight = ~r_over & ((li == ai) | l_apex | (cross2d(lp - ap, pl - ap) <= 0))
+        l_over = l_tight & ~l_apex & (ri2 != ai) & (cross2d(rp2 - ap, pl - ap) <= 0)
         l_move = l_tight & ~l_over
         lp2 = jnp.where(l_move, pl, lp)
         li2 = jnp.where(l_move, il, li)

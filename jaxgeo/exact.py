@@ -193,7 +193,7 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     prev = xy[jnp.maximum(q - 1, 0)]
     nxt = xy[jnp.minimum(q + 1, pinned.shape[0] - 1)]
     d_in, d_out = xy - prev, nxt - xy
-    tau = jnp.arctan2(_sleeve._cross(d_in, d_out), jnp.sum(d_in * d_out, -1))
+    tau = jnp.arctan2(_sleeve.cross2d(d_in, d_out), jnp.sum(d_in * d_out, -1))
     is_left = sleeve.inst_is_left[inst]
     beta = jnp.pi + jnp.where(is_left, tau, -tau)
     v = sleeve.inst_vertex[inst]
@@ -481,8 +481,8 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
     P, Q = xy[j], xy[j + 1]
     lxy, rxy = _sleeve.portal_xy(sl)
     dq = Q - P
-    den = _sleeve._cross(lxy - rxy, dq)
-    tt = _sleeve._cross(P - rxy, dq) / jnp.where(den != 0, den, 1.0)
+    den = _sleeve.cross2d(lxy - rxy, dq)
+    tt = _sleeve.cross2d(P - rxy, dq) / jnp.where(den != 0, den, 1.0)
     # a taut string crosses every portal between its ends (to rounding); one that
     # does not is a failed solve, never a path
     inside = ~emit | at_vertex | ((tt > -_PORTAL_SLACK) & (tt < 1 + _PORTAL_SLACK))

@@ -106,7 +106,7 @@ class CutMesh:
 
     def cloth_seams(self) -> list[list[int]]:
         """Per cloth, the seams on its boundary (sorted)."""
-        uniq, inv = _edge_table(self.faces)
+        uniq, inv = edge_table(self.faces)
         face_of_half = np.repeat(np.arange(len(self.faces)), 3)
         index = {tuple(r): i for i, r in enumerate(uniq.tolist())}
         cloths_of_edge: dict[int, set[int]] = {}
@@ -266,7 +266,7 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
     return cut
 
 
-def _edge_table(F: np.ndarray):
+def edge_table(F: np.ndarray):
     """Unique undirected edges of faces `F` and, per face corner side, its edge."""
     half = np.stack([F, np.roll(F, -1, axis=1)], axis=-1).reshape(-1, 2)
     key = np.sort(half, axis=1)
@@ -275,7 +275,7 @@ def _edge_table(F: np.ndarray):
 
 
 def _cloth_labels(F: np.ndarray, seam_pairs: np.ndarray) -> np.ndarray:
-    uniq, inv = _edge_table(F)
+    uniq, inv = edge_table(F)
     face_of_half = np.repeat(np.arange(len(F)), 3)
     cut = np.zeros(len(uniq), bool)
     if len(seam_pairs):
@@ -343,7 +343,7 @@ def _lscm(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def _boundary_edges(F: np.ndarray) -> np.ndarray:
-    uniq, inv = _edge_table(F)
+    uniq, inv = edge_table(F)
     counts = np.bincount(inv, minlength=len(uniq))
     return uniq[counts == 1]
 
@@ -358,7 +358,7 @@ def flatten_cloth(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Flatten a disk-like cloth `(V, F)`: LSCM, then least edge-length strain.
 
-    **Arguments:** `seam_mask` marks, per unique edge (`_edge_table(F)` order),
+    **Arguments:** `seam_mask` marks, per unique edge (`edge_table(F)` order),
     the seam edges, weighted `SEAM_WEIGHT` in the strain fit.
 
     **Returns:** `(uv, edges)`: the 2-D positions `(V, 2)` (orientation
@@ -367,7 +367,7 @@ def flatten_cloth(
     uv = _lscm(V, F)
     if np.sum(_signed_areas(uv, F)) < 0:
         uv[:, 1] *= -1
-    edges, _ = _edge_table(F)
+    edges, _ = edge_table(F)
     L = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
     l2 = np.linalg.norm(uv[edges[:, 0]] - uv[edges[:, 1]], axis=1)
     uv *= np.sum(L * l2) / np.sum(l2 * l2)  # best uniform scale
@@ -517,7 +517,7 @@ def make_pattern(cut: CutMesh) -> Pattern:
         used, Fl = np.unique(Fg, return_inverse=True)
         Fl = Fl.reshape(-1, 3)
         V = cut.vertices[used]
-        edges, _ = _edge_table(Fl)
+        edges, _ = edge_table(Fl)
         bnd = {tuple(e) for e in _boundary_edges(Fl).tolist()}
         gl = used[edges]
         sid = np.array(

@@ -82,7 +82,7 @@ def _ring_angles(n_rings: int, n_around: int) -> np.ndarray:
     return 2.0 * np.pi * (i + 0.5 * (k % 2)) / n_around
 
 
-def _grid_faces(nx: int, ny: int) -> np.ndarray:
+def grid_faces(nx: int, ny: int) -> np.ndarray:
     """Faces of a `(nx + 1) × (ny + 1)` vertex grid (index `a*(ny + 1) + b`), each
     cell split along alternating diagonals, counter-clockwise in (a, b)."""
     a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
@@ -386,7 +386,7 @@ def saddle(
     x, y = np.meshgrid(s, s, indexing="ij")
     z = height * (x**2 - y**2) / size**2
     v = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
-    return v, _grid_faces(n, n)
+    return v, grid_faces(n, n)
 
 
 # --------------------------------------------------------------------------- sail

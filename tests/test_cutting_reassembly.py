@@ -16,7 +16,7 @@ from jaxgeo.cutting import (
 )
 from jaxgeo.cutting.compensate import principal_angle
 from jaxgeo.pattern import CutMesh, make_pattern
-from jaxgeo.surfaces import _grid_faces
+from jaxgeo.surfaces import grid_faces
 
 MATERIAL = Material(e_warp=600.0, e_weft=400.0, nu=0.3, g=30.0)
 PRESTRESS = Prestress(warp=2.0, weft=1.5)
@@ -28,7 +28,7 @@ def cylinder_patch(n=10, radius=0.7, angle=1.2, height=0.8):
     a, z = np.meshgrid(np.linspace(0, angle, n + 1), np.linspace(0, height, n + 1))
     a, z = a.T.ravel(), z.T.ravel()
     v = np.column_stack([radius * np.cos(a), radius * np.sin(a), z])
-    return v, _grid_faces(n, n)
+    return v, grid_faces(n, n)
 
 
 @pytest.fixture(scope="module")

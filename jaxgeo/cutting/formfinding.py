@@ -115,9 +115,9 @@ def four_point_sail(
         [[0, 0, low], [span, 0, high], [span, span, low], [0, span, high]], float
     )
     v = force_density(edges, q, corners, xyz, (n + 1) ** 2)
-    from ..surfaces import _grid_faces
+    from ..surfaces import grid_faces
 
-    f = _grid_faces(n, n)
+    f = grid_faces(n, n)
     # orient up: the first face's normal should have a positive z component
     p = v[f[0]]
     if np.cross(p[1] - p[0], p[2] - p[0])[2] < 0:

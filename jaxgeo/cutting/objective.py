@@ -119,9 +119,9 @@ class Capacity:
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
-    from ..pattern import _edge_table
+    from ..pattern import edge_table
 
-    return _edge_table(faces)[0]
+    return edge_table(faces)[0]
 
 
 def make_template(
