@@ -131,6 +131,7 @@ SHARDED = textwrap.dedent(
 )
 
 
+@pytest.mark.slow  # 4 host devices in a subprocess compile again: ~23 s cold
 def test_sharded_batch_equals_unsharded():
     """Four forced host devices (the flag must be set before JAX starts, hence a
     subprocess); the batch axis is split across them."""

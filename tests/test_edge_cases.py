@@ -115,6 +115,7 @@ def test_bad_options_raise(kwargs, message):
         jg.shortest_path(FLAT, A, B, **kwargs)
 
 
+@pytest.mark.slow  # compiles another max_points: ~12 s cold (README tests ≤ 5 min)
 def test_numpy_integer_options_are_accepted():
     path = jg.shortest_path(FLAT, A, B, max_points=np.int64(1024))
     np.testing.assert_allclose(float(path.length), np.linalg.norm(B - A), rtol=1e-12)

@@ -234,6 +234,7 @@ def test_method_objects_carry_options():
         jg.shortest_path(mesh, v[0], v[1], method=jg.Laser(candidates="some"))
 
 
+@pytest.mark.slow  # its own flat-grid compile: ~35 s cold (README tests ≤ 5 min)
 def test_straight_segment_through_vertices_on_a_flat_grid():
     """Regression: a chord through a grid vertex (a degenerate funnel) came out
     5.8 % long when the funnel skipped the crossing test for the side at its

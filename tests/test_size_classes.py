@@ -211,6 +211,7 @@ def _assert_same(got, ref, mesh):
 PAIRS = np.array([[3, 140], [20, 131], [0, 100], [60, 7]])
 
 
+@pytest.mark.slow  # an unpadded compile of its own: ~25 s cold (README tests ≤ 5 min)
 def test_exact_paths_padded_equal_unpadded():
     mesh = holed_plate()
     _assert_same(*_both(mesh, "exact", PAIRS), mesh)
