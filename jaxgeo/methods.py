@@ -31,7 +31,9 @@ class Exact(eqx.Module):
     graph paths refined by wedge flips until locally shortest, then `detours`
     corridors round the other side of the best path's nearest cone vertices
     (`detour_rounds` times); the shortest kept. Length and points differentiable.
-    The default method."""
+    The default method. `corridor_capacity`: faces a corridor may hold (None:
+    `max_points`; `shortest_path` and `shortest_paths` then try 256 first, see
+    `first_attempt`)."""
 
     max_starts: int = 4
     max_iterations: int = 256
