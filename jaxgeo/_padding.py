@@ -168,6 +168,8 @@ def _cached_topology(mesh: Mesh, c: SizeClass) -> dict[str, Any]:
     if hit is not None and all(hit[0][k]() is getattr(mesh, k) for k in names):
         return hit[1]
     fields = _pad_topology(mesh, c)
+    if any(_is_traced(x) for x in fields.values()):
+        return fields  # padded inside an outer jit's trace: must not outlive it
 
     def drop(ref, key=key):
         entry = _CACHE.get(key)
@@ -200,7 +202,9 @@ def padded(mesh: Mesh) -> Mesh:
         pv = entry[2][1]
     else:
         pv = _pad_vertices(v, n)
-        if entry is not None:
+        # under an outer jit a concrete mesh is padded inside the trace: the
+        # result is then a tracer of that trace and must not outlive it
+        if entry is not None and not _is_traced(pv):
             _CACHE[id(mesh.faces)] = (entry[0], entry[1], (weakref.ref(v), pv))
     fields["vertices"] = pv
     names = [f.name for f in dataclasses.fields(mesh)]

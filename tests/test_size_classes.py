@@ -167,6 +167,18 @@ def test_a_traced_mesh_is_padded_inside_the_trace():
     assert (mesh.n_vertices, 3) not in shapes and (mesh.n_faces, 3) not in shapes
 
 
+def test_padding_a_concrete_mesh_inside_a_jit_caches_no_tracer():
+    """A mesh closed over by a user's jit is concrete, but its padding is traced
+    there: caching it leaked a tracer into every later call (UnexpectedTracerError
+    in tests/test_throw.py's jitted path_length)."""
+    tm = trimesh.creation.icosphere(1)  # a fresh mesh: nothing cached for it yet
+    mesh = jg.Mesh(tm.vertices, tm.faces)
+    inside = float(jax.jit(lambda: jnp.sum(mesh.padded().faces))())
+    outside = mesh.padded()  # would raise if the traced padding had been cached
+    assert not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(outside))
+    assert float(jnp.sum(outside.faces)) == inside
+
+
 def _both(mesh, method, pairs):
     """The paths of vertex `pairs` on the padded mesh (the public API) and on the
     real mesh (the jitted solver handed the unpadded arrays). test_exact's
