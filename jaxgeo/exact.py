@@ -540,7 +540,7 @@ def exact_solve(
     landmark starts refined per pair; `max_iterations`: flip rounds at most;
     `corridor_capacity`: faces a corridor may hold (default `max_points`; a pair
     any of whose lanes outgrew it has `stats.outgrew` set, see
-    `jaxgeo.geodesic.solve_with_retry`); `detours`: after the starts, refine this
+    `jaxgeo.methods.first_attempt`); `detours`: after the starts, refine this
     many corridors that pass the best path's nearest cone vertices on their other
     side (`_detours`), in `detour_rounds` rounds, each from the best path so far.
 
