@@ -205,13 +205,14 @@ def lane_loop(cond, body, state):
 
 
 def funnel(
-    sleeves: Sleeve,
+    sleeves: Sleeve, active: Bool[Array, " B"] | None = None
 ) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
     """The shortest path inside each sleeve of a lane batch (the funnel algorithm
     of Lee & Preparata, in the form of Mononen's "simple stupid funnel"): the
     instance ids of the points where it bends, `START` first and `END` last, their
     count, and False when the loop ran out of steps (it cannot for a valid sleeve:
-    each restart moves on)."""
+    each restart moves on). Lanes where `active` is False take no step (their
+    result is meaningless)."""
     cap = sleeves.left.shape[-1]
     # a guard, not a budget: each restart goes back to the portal after the new
     # apex, so a sleeve of n portals takes up to n·(bends + 1) steps (a corridor
@@ -292,8 +293,9 @@ def funnel(
     sp = sleeves.start_xy
     i32 = jnp.zeros(lanes, jnp.int32)
     out = jnp.full((lanes, cap + 2), END, jnp.int32).at[:, 0].set(START)
+    i0 = i32 if active is None else jnp.where(active, 0, sleeves.n).astype(jnp.int32)
     init = (
-        sleeves, i32, sp, i32 + START, i32 - 1, sp, i32 + START, i32 - 1,
+        sleeves, i0, sp, i32 + START, i32 - 1, sp, i32 + START, i32 - 1,
         sp, i32 + START, i32 - 1, out, i32 + 1, i32, lxy, rxy,
     )  # fmt: skip
     s = lane_loop(cond, body, init)
@@ -306,3 +308,133 @@ def funnel(
 
     out, m = jax.vmap(close)(out, m)
     return out, m.astype(jnp.int32), steps < limit
+
+
+def _pin_ranges(sl: Sleeve, pins):
+    """Portal range [a, b] of every pinned point (START: −1, END: n − 1)."""
+    inst = jnp.maximum(pins, 0)
+    a = jnp.where(pins == START, -1, jnp.where(pins == END, sl.n - 1, sl.inst_first[inst]))
+    b = jnp.where(pins == START, -1, jnp.where(pins == END, sl.n - 1, sl.inst_last[inst]))
+    return a, b
+
+
+def _pins_xy(sl: Sleeve, pins):
+    inst = jnp.maximum(pins, 0)
+    return jnp.where(
+        (pins == START)[:, None],
+        sl.start_xy,
+        jnp.where((pins == END)[:, None], sl.end_xy, sl.inst_xy[inst]),
+    )
+
+
+def _pull_step(sl: Sleeve, pins, m, tol, angle_tol):
+    """One step of the parallel string pull of one sleeve: in every segment
+    between consecutive pins, pin the portal end that the segment misses by the
+    most; unpin every point the string turns away from. Returns the new pins,
+    their count, and whether anything changed."""
+    cap = sl.left.shape[0]
+    size = pins.shape[0]
+    j_all = jnp.arange(size)
+    live_pin = j_all < m
+    a, b = _pin_ranges(sl, pins)
+    xy = _pins_xy(sl, pins)
+    # segment j runs from pin j to pin j + 1; portal k lies in segment j(k), the
+    # last pin whose range ends before k, unless it is in pin j(k)+1's range
+    k = jnp.arange(cap)
+    mark = jnp.full(cap + 1, -1, jnp.int32).at[
+        jnp.where(live_pin & (j_all < m - 1), b + 1, cap)
+    ].max(j_all.astype(jnp.int32), mode="drop")
+    seg = jnp.clip(jax.lax.cummax(mark[:cap]), 0, size - 2)
+    portal_live = (k < sl.n - 1) & (k > b[seg]) & (k < a[seg + 1])
+    P, Q = xy[seg], xy[seg + 1]
+    d = Q - P
+    dn = safe_norm(d)
+    dn_ = jnp.where(dn > 0, dn, 1.0)
+    lxy, rxy = portal_xy(sl)
+    # depth by which the segment's line misses each end (> 0: on the wrong side)
+    miss_l = -cross2d(d, lxy - P) / dn_
+    miss_r = cross2d(d, rxy - P) / dn_
+    use_l = miss_l >= miss_r
+    depth = jnp.where(portal_live & (dn > 0), jnp.maximum(miss_l, miss_r), -jnp.inf)
+    cand = jnp.where(use_l, sl.left_inst, sl.right_inst)
+    best = jax.ops.segment_max(depth, seg, num_segments=size)
+    is_best = (depth == best[seg]) & (depth > tol)
+    first_k = jax.ops.segment_min(jnp.where(is_best, k, cap), seg, num_segments=size)
+    ins = (first_k < cap) & live_pin & (j_all < m - 1)
+    ins_inst = cand[jnp.minimum(first_k, cap - 1)]
+    # turns: a left pin must turn left (counter-clockwise), a right pin right
+    prev = xy[jnp.maximum(j_all - 1, 0)]
+    nxt = xy[jnp.minimum(j_all + 1, size - 1)]
+    turn = cross2d(xy - prev, nxt - xy)
+    inner = (j_all >= 1) & (j_all < m - 1)
+    is_left = sl.inst_is_left[jnp.maximum(pins, 0)]
+    scale = safe_norm(xy - prev) * safe_norm(nxt - xy)
+    wrong = inner & jnp.where(
+        is_left, turn < -angle_tol * scale, turn > angle_tol * scale
+    )
+    # a pin is dropped when it turns the wrong way, but not two neighbours at once
+    # (each one's turn is measured against the other)
+    prev_wrong = jnp.concatenate([jnp.array([False]), wrong[:-1]])
+    drop = wrong & ~(prev_wrong & (jnp.arange(size) % 2 == 1))
+    keep = live_pin & ~drop
+    count = keep.astype(jnp.int32) + ins.astype(jnp.int32)
+    start = jnp.cumsum(count) - count
+    new = jnp.full(size, END, jnp.int32)
+    new = new.at[jnp.where(keep, start, size)].set(pins, mode="drop")
+    new = new.at[jnp.where(ins, start + keep, size)].set(ins_inst, mode="drop")
+    new_m = jnp.sum(count)
+    changed = jnp.any(ins) | jnp.any(drop)
+    return new, new_m.astype(jnp.int32), changed, new_m <= size
+
+
+def pull(
+    sleeves: Sleeve, max_steps: int = 64
+) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
+    """The shortest path inside each sleeve of a lane batch, pinned points as
+    `funnel` gives them, computed in parallel over the portals: starting from the
+    straight segment, every step pins in each segment between consecutive pins
+    the portal end its line misses by the most, and unpins the points the string
+    turns away from. The result is the shortest path when no portal end is
+    missed and every pin is wrapped the right way (a locally shortest path in a
+    simply connected sleeve is the shortest); a lane that does not reach that in
+    `max_steps` steps (about log₂ of the pins in practice) is solved again by the
+    sequential `funnel`. Returns pins, their count and False where neither
+    converged."""
+    lanes = sleeves.n.shape[0]
+    cap = sleeves.left.shape[-1]
+    size = cap + 2
+    dtype = sleeves.inst_xy.dtype
+    extent = jnp.max(jnp.abs(sleeves.inst_xy), axis=(1, 2)) + safe_norm(
+        sleeves.start_xy - sleeves.end_xy
+    )
+    # rounding of the unfolding: in lengths (relative to the sleeve's extent) and
+    # in the sine of a turn
+    angle_tol = 64 * float(jnp.finfo(dtype).eps)
+    tol = angle_tol * extent
+    pins = jnp.full((lanes, size), END, jnp.int32).at[:, 0].set(START)
+    m = jnp.full(lanes, 2, jnp.int32)
+
+    def cond(s):
+        _, _, changed, fits, step = s
+        return (step < max_steps) & jnp.any(changed & fits)
+
+    def body(s):
+        pins, m, changed, fits, step = s
+        go = changed & fits
+        p2, m2, c2, f2 = jax.vmap(_pull_step, in_axes=(0, 0, 0, 0, None))(
+            sleeves, pins, m, tol, angle_tol
+        )
+        return (
+            jnp.where(go[:, None], p2, pins),
+            jnp.where(go, m2, m),
+            jnp.where(go, c2, changed),
+            jnp.where(go, f2, fits),
+            step + 1,
+        )
+
+    init = (pins, m, jnp.ones(lanes, bool), jnp.ones(lanes, bool), jnp.int32(0))
+    pins, m, changed, fits, _ = jax.lax.while_loop(cond, body, init)
+    done = ~changed & fits
+    f_pins, f_m, f_ok = funnel(sleeves, active=~done)
+    pins = jnp.where(done[:, None], pins, f_pins)
+    return pins, jnp.where(done, m, f_m), done | f_ok

@@ -1,6 +1,6 @@
 """Starting corridors for the exact engine: graph paths through landmarks, turned
-into face corridors (JAX, per query; the forests are built once per mesh, see
-`jaxgeo._landmarks`)."""
+into face corridors (JAX, per query; the forests of the graph of vertices and edge
+midpoints are built once per mesh, see `jaxgeo._landmarks`)."""
 
 from __future__ import annotations
 
@@ -15,52 +15,54 @@ def best_slots(
     mesh: Mesh, vs: Int[Array, ""], vt: Int[Array, ""], k: int
 ) -> tuple[Int[Array, " k"], Bool[Array, " k"]]:
     """The k landmark slots whose graph path s → landmark → t is shortest, and
-    whether each connects s and t (same forest root)."""
+    whether each connects s and t (both reach the slot's landmark)."""
     via = mesh.landmark_dist[:, vs] + mesh.landmark_dist[:, vt]
-    same = (mesh.landmark_root[:, vs] == mesh.landmark_root[:, vt]) & (
-        mesh.landmark_root[:, vs] >= 0
-    )
-    via = jnp.where(same, via, jnp.inf)
     k = min(k, via.shape[0])
     neg, slots = jax.lax.top_k(-via, k)
     return slots, jnp.isfinite(neg)
 
 
-def vertex_path(
+def _parent(mesh: Mesh, slot, node):
+    """The node one step towards the landmark of `slot` (−1 at the landmark)."""
+    x = node // 2
+    pv = mesh.landmark_pred_vertex[slot, jnp.minimum(x, mesh.n_vertices - 1)]
+    pe = mesh.landmark_pred_edge[slot, jnp.minimum(x, mesh.n_edges - 1)]
+    return jnp.where(node % 2 == 1, pe, pv)
+
+
+def node_path(
     mesh: Mesh, slot: Int[Array, ""], vs: Int[Array, ""], vt: Int[Array, ""], cap: int
 ) -> tuple[Int[Array, " cap"], Int[Array, ""], Bool[Array, ""]]:
-    """The forest path of `slot` from vs to vt through their lowest common
-    ancestor: vertices (cap,), their number, and False if it exceeds `cap`."""
-    pred = mesh.landmark_pred[slot]
-
-    def up(v):
-        k = pred[v]
-        return jnp.where(k >= 0, mesh.fan_spokes[v, jnp.maximum(k, 0)], v), k >= 0
+    """The forest path of `slot` from vertex vs to vertex vt through their lowest
+    common ancestor, as graph nodes (2·v: vertex v, 2·e + 1: midpoint of edge e):
+    nodes (cap,), their number, and False if it exceeds `cap`."""
 
     def body(s):
         a, b, na, nb, buf_a, buf_b, go_a, go_b = s
         buf_a = jnp.where(go_a, buf_a.at[na].set(a, mode="drop"), buf_a)
         buf_b = jnp.where(go_b, buf_b.at[nb].set(b, mode="drop"), buf_b)
-        a2, more_a = up(a)
-        b2, more_b = up(b)
+        a2, b2 = _parent(mesh, slot, a), _parent(mesh, slot, b)
         return (
-            a2,
-            b2,
+            jnp.where(a2 >= 0, a2, a),
+            jnp.where(b2 >= 0, b2, b),
             na + go_a,
             nb + go_b,
             buf_a,
             buf_b,
-            go_a & more_a & (na + 1 < cap),
-            go_b & more_b & (nb + 1 < cap),
+            go_a & (a2 >= 0) & (na + 1 < cap),
+            go_b & (b2 >= 0) & (nb + 1 < cap),
         )
 
     empty = jnp.full(cap, -1, jnp.int32)
-    init = (vs, vt, 0, 0, empty, empty, True, True)
-    init = tuple(jnp.asarray(x) for x in init)
+    init = (2 * vs, 2 * vt, 0, 0, empty, empty, True, True)
+    init = tuple(jnp.asarray(x, jnp.int32) for x in init[:4]) + init[4:6] + (
+        jnp.asarray(True),
+        jnp.asarray(True),
+    )
     s = jax.lax.while_loop(lambda s: s[6] | s[7], body, init)
     _, _, na, nb, buf_a, buf_b, _, _ = s
-    complete = (pred[buf_a[jnp.maximum(na - 1, 0)]] < 0) & (
-        pred[buf_b[jnp.maximum(nb - 1, 0)]] < 0
+    complete = (_parent(mesh, slot, buf_a[jnp.maximum(na - 1, 0)]) < 0) & (
+        _parent(mesh, slot, buf_b[jnp.maximum(nb - 1, 0)]) < 0
     )
     # common tail (from the root backwards): its length p
     i = jnp.arange(cap)
@@ -69,14 +71,13 @@ def vertex_path(
     same = (ra == rb) & (i < jnp.minimum(na, nb))
     p = jnp.argmin(jnp.concatenate([same, jnp.array([False])]))
     count = na + nb - 2 * p + 1
-    j = jnp.arange(cap)
     path = jnp.where(
-        j <= na - p,
-        buf_a[jnp.clip(j, 0, cap - 1)],
-        buf_b[jnp.clip(na + nb - 2 * p - j, 0, cap - 1)],
+        i <= na - p,
+        buf_a[jnp.clip(i, 0, cap - 1)],
+        buf_b[jnp.clip(na + nb - 2 * p - i, 0, cap - 1)],
     )
     ok = complete & (count <= cap) & (p >= 1)
-    return jnp.where(j < count, path, -1), count.astype(jnp.int32), ok
+    return jnp.where(i < count, path, -1), count.astype(jnp.int32), ok
 
 
 def face_fan_position(mesh: Mesh, face, vertex):
@@ -100,7 +101,21 @@ def _turn(n, closed, p_from, p_to_ccw, p_to_cw):
     return direction, count, ccw_ok | cw_ok
 
 
-def corridor_from_vertices(
+def _face_of_edge_with(mesh: Mesh, e, v):
+    """The face of edge e that has corner v (−1 if none)."""
+    ef = mesh.edge_faces[e]
+    has = jnp.any(mesh.faces[jnp.maximum(ef, 0)] == v, axis=1) & (ef >= 0)
+    return jnp.where(has[0], ef[0], jnp.where(has[1], ef[1], -1))
+
+
+def _common_face(mesh: Mesh, e1, e2):
+    """The face of both edges e1 and e2 (−1 if none)."""
+    a, b = mesh.edge_faces[e1], mesh.edge_faces[e2]
+    hit = (a[:, None] == b[None, :]) & (a[:, None] >= 0)
+    return jnp.where(hit[0].any(), a[0], jnp.where(hit[1].any(), a[1], -1))
+
+
+def corridor_from_nodes(
     mesh: Mesh,
     path: Int[Array, " P"],
     count: Int[Array, ""],
@@ -108,52 +123,82 @@ def corridor_from_vertices(
     end_face: Int[Array, ""],
     cap: int,
 ) -> tuple[Int[Array, " cap"], Int[Array, ""], Bool[Array, ""]]:
-    """A face corridor that follows the vertex path (start_face contains path[0],
-    end_face path[count − 1]): round each vertex through its fan, the shorter way,
-    from the face it was entered by to a face of the next edge."""
+    """A face corridor that follows a graph path (`node_path`; its first and last
+    nodes are vertices of start_face and end_face): round each vertex through its
+    fan, the shorter way, from the face it was entered by to a face of the next
+    segment; across each midpoint's edge into the face of the next segment."""
+    width = mesh.fan_faces.shape[1]
 
     def body(i, s):
-        p_e, dirs, counts, starts, ok = s
-        v = path[i]
+        c, runs_v, runs_p, runs_d, runs_n, runs_f, ok = s
+        node = path[i]
+        nxt = path[jnp.minimum(i + 1, path.shape[0] - 1)]
+        last = i == count - 1
+        x, y = node // 2, nxt // 2
+        at_vertex, to_vertex = node % 2 == 0, nxt % 2 == 0
+        # the face of the segment node → nxt, where it is one face
+        seg_face = jnp.where(
+            at_vertex,
+            _face_of_edge_with(mesh, y, x),  # vertex → midpoint
+            jnp.where(
+                to_vertex,
+                _face_of_edge_with(mesh, x, y),  # midpoint → vertex
+                _common_face(mesh, x, y),  # midpoint → midpoint
+            ),
+        )
+        # at a vertex: turn round its fan
+        v = jnp.where(at_vertex, x, 0)
         n = mesh.fan_size[v]
         closed = mesh.fan_closed[v]
-        last = i == count - 1
-        w = path[jnp.minimum(i + 1, path.shape[0] - 1)]
-        q = jnp.argmax(mesh.fan_spokes[v] == w)  # spoke to the next vertex
-        has_q = jnp.any(mesh.fan_spokes[v] == w)
+        p_e = face_fan_position(mesh, c, v)
+        q = jnp.argmax(mesh.fan_spokes[v] == y)  # spoke to the next vertex
+        along = to_vertex & jnp.any(mesh.fan_spokes[v] == y)
+        p_seg = face_fan_position(mesh, jnp.maximum(seg_face, 0), v)
         p_end = face_fan_position(mesh, end_face, v)
         to_ccw = jnp.where(
-            last, p_end, jnp.where(closed, (q - 1) % jnp.maximum(n, 1), q - 1)
+            last,
+            p_end,
+            jnp.where(
+                to_vertex, jnp.where(closed, (q - 1) % jnp.maximum(n, 1), q - 1), p_seg
+            ),
         )
-        to_cw = jnp.where(last, p_end, q)
-        d, c, turn_ok = _turn(n, closed, p_e, to_ccw, to_cw)
+        to_cw = jnp.where(last, p_end, jnp.where(to_vertex, q, p_seg))
+        d, cnt, turn_ok = _turn(n, closed, p_e, to_ccw, to_cw)
         exit_pos = jnp.where(d > 0, to_ccw, to_cw)
-        exit_face = mesh.fan_faces[
-            v, jnp.clip(exit_pos, 0, mesh.fan_faces.shape[1] - 1)
-        ]
-        nxt = face_fan_position(mesh, exit_face, w)
+        exit_face = mesh.fan_faces[v, jnp.clip(exit_pos, 0, width - 1)]
+        skip = (i > 0).astype(jnp.int32)  # the face entered by is in already
+        vertex_ok = turn_ok & (last | along | (~to_vertex & (seg_face >= 0)))
+        # at a midpoint: across its edge, unless the next segment is in this face
+        ef = mesh.edge_faces[x]
+        mid_ok = (
+            ~last & (seg_face >= 0) & ((c == ef[0]) | (c == ef[1]))
+            & ((seg_face == ef[0]) | (seg_face == ef[1]))
+        )  # fmt: skip
         return (
-            jnp.where(last, p_e, nxt),
-            dirs.at[i].set(d),
-            counts.at[i].set(c),
-            starts.at[i].set(p_e),
-            ok & turn_ok & (last | has_q),
+            jnp.where(at_vertex, exit_face, seg_face),
+            runs_v.at[i].set(jnp.where(at_vertex, v, -1)),
+            runs_p.at[i].set(p_e + d * skip),
+            runs_d.at[i].set(d),
+            runs_n.at[i].set(jnp.where(at_vertex, cnt - skip, seg_face != c)),
+            runs_f.at[i].set(seg_face),
+            ok & jnp.where(at_vertex, vertex_ok, mid_ok),
         )
 
     m = path.shape[0]
     zeros = jnp.zeros(m, jnp.int32)
-    p0 = face_fan_position(mesh, start_face, path[0])
-    init = (p0, zeros, zeros, zeros, jnp.asarray(True))
-    _, dirs, counts, starts, ok = jax.lax.fori_loop(0, count, body, init)
-    live = jnp.arange(m) < count
-    # each fan after the first starts with the face the previous one ended on
-    contrib = jnp.where(live, counts - (jnp.arange(m) > 0), 0)
+    init = (jnp.asarray(start_face, jnp.int32), zeros, zeros, zeros, zeros, zeros)
+    init = init + (jnp.asarray(True),)
+    _, runs_v, runs_p, runs_d, runs_n, runs_f, ok = jax.lax.fori_loop(
+        0, count, body, init
+    )
+    contrib = jnp.where(jnp.arange(m) < count, runs_n, 0)
     cum = jnp.cumsum(contrib)
     total = cum[-1]
     j = jnp.arange(cap)
     i = jnp.clip(jnp.searchsorted(cum, j, side="right"), 0, m - 1)
-    offset = j - (cum[i] - contrib[i]) + (i > 0)
-    v = path[i]
-    pos = (starts[i] + dirs[i] * offset) % jnp.maximum(mesh.fan_size[v], 1)
-    faces = jnp.where(j < total, mesh.fan_faces[v, pos], -1)
-    return faces, total.astype(jnp.int32), ok & (total <= cap)
+    offset = j - (cum[i] - contrib[i])
+    v = jnp.maximum(runs_v[i], 0)
+    pos = (runs_p[i] + runs_d[i] * offset) % jnp.maximum(mesh.fan_size[v], 1)
+    face = jnp.where(runs_v[i] >= 0, mesh.fan_faces[v, pos], runs_f[i])
+    faces = jnp.where(j < total, face, -1)
+    return faces, total.astype(jnp.int32), ok & (total <= cap) & (count >= 1)

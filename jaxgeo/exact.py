@@ -43,7 +43,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from . import _sleeve
 from ._numerics import safe_norm
-from ._starts import best_slots, corridor_from_vertices, face_fan_position, vertex_path
+from ._starts import best_slots, corridor_from_nodes, face_fan_position, node_path
 from .locate import SurfacePoint, snap
 from .mesh import Mesh
 from .path import EDGE, FACE, VERTEX, Status
@@ -242,7 +242,7 @@ def _detours(mesh: Mesh, theta, corridor, n, s, t, k: int, tol):
     that all reach the same one cannot tell; a detour starts in the other."""
     sl = _sleeve_of(mesh, corridor, n, s, t)
     pinned, m, _ = jax.tree.map(
-        lambda x: x[0], _sleeve.funnel(jax.tree.map(lambda x: x[None], sl))
+        lambda x: x[0], _sleeve.pull(jax.tree.map(lambda x: x[None], sl))
     )
     cap = corridor.shape[0]
     inst = jnp.arange(cap + 1)
@@ -379,7 +379,7 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
         sl = jax.vmap(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
             lane.corridor, lane.n, s, t
         )
-        pinned, m, fun_ok = _sleeve.funnel(sl)
+        pinned, m, fun_ok = _sleeve.pull(sl)
         length = jax.vmap(_pinned_length)(sl, pinned, m)
         taken, v, a, b, p0, d, count = jax.vmap(
             lambda c, sl_, p, m_: _flips(mesh, theta, c, sl_, p, m_, tol)
@@ -432,8 +432,8 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
 def _start(mesh, slot, slot_ok, vs, vt, s, t, cap):
     """A starting corridor from the forest path of `slot` from vertex vs (of the
     start's face) to vt (of the end's face); one lane."""
-    path, count, path_ok = vertex_path(mesh, slot, vs, vt, cap)
-    corridor, n, c_ok = corridor_from_vertices(mesh, path, count, s.face, t.face, cap)
+    path, count, path_ok = node_path(mesh, slot, vs, vt, cap)
+    corridor, n, c_ok = corridor_from_nodes(mesh, path, count, s.face, t.face, cap)
     status0 = jnp.where(
         ~slot_ok, Status.REFINE_FAILED, jnp.where(path_ok & c_ok, -1, Status.MAX_STEPS)
     )
@@ -461,7 +461,7 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
     corridor, differentiable in the vertices and the endpoints' barycentrics."""
     sl = _sleeve_of(mesh, corridor, n, s, t)
     one = jax.tree.map(lambda x: x[None], jax.lax.stop_gradient(sl))
-    pinned, m, _ = jax.tree.map(lambda x: x[0], _sleeve.funnel(one))
+    pinned, m, _ = jax.tree.map(lambda x: x[0], _sleeve.pull(one))
     length = _pinned_length(sl, pinned, m)
     cap = corridor.shape[0]
     q = jnp.arange(pinned.shape[0])

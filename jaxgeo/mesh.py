@@ -372,9 +372,10 @@ class Mesh(eqx.Module):
     - `mean_edge_length`: a scalar length scale (tolerances are relative to it).
     - `fan_faces`, `fan_spokes`, `fan_size`, `fan_closed`, `corner_fan_pos`: the
       faces and edges round every vertex in rotational order (`jaxgeo._fans`).
-    - `landmark_pred`, `landmark_dist`, `landmark_root`: shortest-path forests of
-      `landmarks` landmark slots on the edge graph, from which the exact method
-      reads its starting paths (`jaxgeo._landmarks`).
+    - `landmark_pred_vertex`, `landmark_pred_edge`, `landmark_dist`:
+      shortest-path forests of `landmarks` landmark slots on the graph of vertices
+      and edge midpoints, from which the exact method reads its starting paths
+      (`jaxgeo._landmarks`).
 
     **Size classes.** The arrays above have the mesh's real sizes. The solvers
     are handed `mesh.padded()`, the same arrays padded to the mesh's
@@ -405,9 +406,9 @@ class Mesh(eqx.Module):
     fan_size: Int[Array, " V"]
     fan_closed: Bool[Array, " V"]
     corner_fan_pos: Int[Array, "F 3"]
-    landmark_pred: Int[Array, "M V"]
+    landmark_pred_vertex: Int[Array, "M V"]
+    landmark_pred_edge: Int[Array, "M E"]
     landmark_dist: Float[Array, "M V"]
-    landmark_root: Int[Array, "M V"]
 
     def __init__(
         self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS
@@ -447,11 +448,11 @@ class Mesh(eqx.Module):
             fans["fan_size"] > 0, component[np.maximum(fans["fan_faces"][:, 0], 0)], -1
         )
         forests = landmark_forests(
-            v, edges, fans["fan_spokes"], vertex_component, max(int(landmarks), 1)
+            v, f, edges, face_edges, vertex_component, max(int(landmarks), 1)
         )
-        self.landmark_pred = jnp.asarray(forests["pred_spoke"])
-        self.landmark_dist = jnp.asarray(forests["dist"])
-        self.landmark_root = jnp.asarray(forests["root"])
+        self.landmark_pred_vertex = jnp.asarray(forests["pred_vertex"])
+        self.landmark_pred_edge = jnp.asarray(forests["pred_edge"])
+        self.landmark_dist = jnp.asarray(forests["dist_vertex"])
 
     @property
     def n_vertices(self) -> int:

@@ -81,10 +81,11 @@ def test_padded_layout(make):
     assert np.all(np.asarray(p.fan_size)[n_v:] == 0)
     assert np.all(np.asarray(p.fan_faces)[:, mesh.fan_faces.shape[1] :] == -1)
     assert np.all(np.isinf(np.asarray(p.landmark_dist)[:, n_v:]))
-    assert np.all(np.asarray(p.landmark_root)[:, n_v:] == -1)
+    assert np.all(np.asarray(p.landmark_pred_vertex)[:, n_v:] == -1)
+    assert np.all(np.asarray(p.landmark_pred_edge)[:, n_e:] == -1)
     # the padded topology is cached and shared by with_vertices
     q = mesh.with_vertices(mesh.vertices * 2).padded()
-    assert q.faces is p.faces and q.landmark_pred is p.landmark_pred
+    assert q.faces is p.faces and q.landmark_pred_edge is p.landmark_pred_edge
     assert mesh.padded().vertices is mesh.padded().vertices  # the last one cached
     np.testing.assert_array_equal(np.asarray(q.vertices)[:n_v], 2 * v)
 
