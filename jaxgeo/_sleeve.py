@@ -313,12 +313,16 @@ def funnel(
 def _pin_ranges(sl: Sleeve, pins):
     """Portal range [a, b] of every pinned point (START: −1, END: n − 1)."""
     inst = jnp.maximum(pins, 0)
-    a = jnp.where(pins == START, -1, jnp.where(pins == END, sl.n - 1, sl.inst_first[inst]))
-    b = jnp.where(pins == START, -1, jnp.where(pins == END, sl.n - 1, sl.inst_last[inst]))
-    return a, b
+    end = sl.n - 1
+
+    def at(first_or_last):
+        return jnp.where(pins == START, -1, jnp.where(pins == END, end, first_or_last))
+
+    return at(sl.inst_first[inst]), at(sl.inst_last[inst])
 
 
-def _pins_xy(sl: Sleeve, pins):
+def pins_xy(sl: Sleeve, pins):
+    """2-D positions of pinned points (instance ids, `START`, `END`)."""
     inst = jnp.maximum(pins, 0)
     return jnp.where(
         (pins == START)[:, None],
@@ -337,13 +341,15 @@ def _pull_step(sl: Sleeve, pins, m, tol, angle_tol):
     j_all = jnp.arange(size)
     live_pin = j_all < m
     a, b = _pin_ranges(sl, pins)
-    xy = _pins_xy(sl, pins)
+    xy = pins_xy(sl, pins)
     # segment j runs from pin j to pin j + 1; portal k lies in segment j(k), the
     # last pin whose range ends before k, unless it is in pin j(k)+1's range
     k = jnp.arange(cap)
-    mark = jnp.full(cap + 1, -1, jnp.int32).at[
-        jnp.where(live_pin & (j_all < m - 1), b + 1, cap)
-    ].max(j_all.astype(jnp.int32), mode="drop")
+    mark = (
+        jnp.full(cap + 1, -1, jnp.int32)
+        .at[jnp.where(live_pin & (j_all < m - 1), b + 1, cap)]
+        .max(j_all.astype(jnp.int32), mode="drop")
+    )
     seg = jnp.clip(jax.lax.cummax(mark[:cap]), 0, size - 2)
     portal_live = (k < sl.n - 1) & (k > b[seg]) & (k < a[seg + 1])
     P, Q = xy[seg], xy[seg + 1]

@@ -55,9 +55,13 @@ def node_path(
 
     empty = jnp.full(cap, -1, jnp.int32)
     init = (2 * vs, 2 * vt, 0, 0, empty, empty, True, True)
-    init = tuple(jnp.asarray(x, jnp.int32) for x in init[:4]) + init[4:6] + (
-        jnp.asarray(True),
-        jnp.asarray(True),
+    init = (
+        tuple(jnp.asarray(x, jnp.int32) for x in init[:4])
+        + init[4:6]
+        + (
+            jnp.asarray(True),
+            jnp.asarray(True),
+        )
     )
     s = jax.lax.while_loop(lambda s: s[6] | s[7], body, init)
     _, _, na, nb, buf_a, buf_b, _, _ = s

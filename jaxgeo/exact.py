@@ -189,7 +189,7 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     the complementary fan (vertex, first position, direction, face count)."""
     q = jnp.arange(pinned.shape[0])
     inst = jnp.maximum(pinned, 0)
-    xy = _pinned_xy(sleeve, pinned)
+    xy = _sleeve.pins_xy(sleeve, pinned)
     prev = xy[jnp.maximum(q - 1, 0)]
     nxt = xy[jnp.minimum(q + 1, pinned.shape[0] - 1)]
     d_in, d_out = xy - prev, nxt - xy
@@ -259,7 +259,7 @@ def _detours(mesh: Mesh, theta, corridor, n, s, t, k: int, tol):
         ),
     )
     j = jnp.clip(jnp.searchsorted(first, a, side="right") - 1, 0, pinned.shape[0] - 2)
-    xy = _pinned_xy(sl, pinned)
+    xy = _sleeve.pins_xy(sl, pinned)
     p, q = xy[j], xy[j + 1]
     w = sl.inst_xy - p
     seg = q - p
@@ -325,19 +325,8 @@ def _apply_flips(mesh: Mesh, corridor, n, taken, v, a, b, p0, d, count):
     return jnp.where(j < total, face, -1), total, total <= cap
 
 
-def _pinned_xy(sleeve: _sleeve.Sleeve, pinned):
-    inst = jnp.maximum(pinned, 0)
-    return jnp.where(
-        (pinned == _sleeve.START)[:, None],
-        sleeve.start_xy,
-        jnp.where(
-            (pinned == _sleeve.END)[:, None], sleeve.end_xy, sleeve.inst_xy[inst]
-        ),
-    )
-
-
 def _pinned_length(sleeve, pinned, m):
-    xy = _pinned_xy(sleeve, pinned)
+    xy = _sleeve.pins_xy(sleeve, pinned)
     seg = safe_norm(xy[1:] - xy[:-1])
     return jnp.sum(jnp.where(jnp.arange(1, pinned.shape[0]) < m, seg, 0.0))
 
@@ -477,7 +466,7 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
     at_vertex = (j >= 1) & (j <= m - 2) & (k <= sl.inst_last[jnp.maximum(pj, 0)])
     portal = k < n - 1
     emit = portal & (~at_vertex | (k == sl.inst_first[jnp.maximum(pj, 0)]))
-    xy = _pinned_xy(sl, pinned)
+    xy = _sleeve.pins_xy(sl, pinned)
     P, Q = xy[j], xy[j + 1]
     lxy, rxy = _sleeve.portal_xy(sl)
     dq = Q - P
