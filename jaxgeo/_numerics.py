@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 
 def safe_norm(x: Float[Array, "... 3"], axis: int = -1) -> Float[Array, ...]:
@@ -21,3 +22,21 @@ def safe_normalize(x: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
 
 def eps_of(dtype) -> float:
     return float(jnp.finfo(dtype).eps)
+
+
+def last_at_or_before(keys: Int[Array, " N"], size: int) -> Int[Array, " size"]:
+    """For every j < `size`: the last index i with `keys[i] ≤ j` (−1 if none),
+    for non-decreasing `keys`. The same as `searchsorted(keys, j, "right") − 1`,
+    as one scatter and one cumulative max (a `searchsorted` is a loop of
+    dependent steps, which costs more on CPU than it does on the data)."""
+    i = jnp.arange(keys.shape[0], dtype=jnp.int32)
+    at = jnp.where(keys < size, jnp.maximum(keys, 0), size)
+    mark = jnp.full(size, -1, jnp.int32).at[at].max(i, mode="drop")
+    return jax.lax.cummax(mark)
+
+
+def run_of(counts: Int[Array, " N"], size: int) -> Int[Array, " size"]:
+    """For slots j < `size` of runs laid end to end (run i has `counts[i]` ≥ 0
+    slots): the run slot j is in (for j past the end: the last non-empty run)."""
+    starts = jnp.cumsum(counts) - counts
+    return jnp.maximum(last_at_or_before(jnp.where(counts > 0, starts, size), size), 0)

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Int
 
+from ._numerics import run_of
 from .mesh import Mesh
 
 
@@ -199,7 +200,7 @@ def corridor_from_nodes(
     cum = jnp.cumsum(contrib)
     total = cum[-1]
     j = jnp.arange(cap)
-    i = jnp.clip(jnp.searchsorted(cum, j, side="right"), 0, m - 1)
+    i = jnp.minimum(run_of(contrib, cap), m - 1)
     offset = j - (cum[i] - contrib[i])
     v = jnp.maximum(runs_v[i], 0)
     pos = (runs_p[i] + runs_d[i] * offset) % jnp.maximum(mesh.fan_size[v], 1)

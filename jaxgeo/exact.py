@@ -42,7 +42,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from . import _sleeve
-from ._numerics import safe_norm
+from ._numerics import last_at_or_before, run_of, safe_norm
 from ._starts import best_slots, corridor_from_nodes, face_fan_position, node_path
 from .locate import SurfacePoint, snap
 from .mesh import Mesh
@@ -258,7 +258,7 @@ def _detours(mesh: Mesh, theta, corridor, n, s, t, k: int, tol):
             sl.inst_first[jnp.maximum(pinned, 0)],
         ),
     )
-    j = jnp.clip(jnp.searchsorted(first, a, side="right") - 1, 0, pinned.shape[0] - 2)
+    j = jnp.clip(last_at_or_before(first, cap + 1)[a], 0, pinned.shape[0] - 2)
     xy = _sleeve.pins_xy(sl, pinned)
     p, q = xy[j], xy[j + 1]
     w = sl.inst_xy - p
@@ -317,7 +317,7 @@ def _apply_flips(mesh: Mesh, corridor, n, taken, v, a, b, p0, d, count):
     cum = jnp.cumsum(cnt)
     total = cum[-1]
     j = jnp.arange(cap)
-    src = jnp.clip(jnp.searchsorted(cum, j, side="right"), 0, cap - 1)
+    src = run_of(cnt, cap)
     off = j - (cum[src] - cnt[src])
     vv = f_v[src]
     pos = (f_p[src] + f_d[src] * off) % jnp.maximum(mesh.fan_size[vv], 1)
@@ -461,7 +461,7 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
         jnp.where((pinned == _sleeve.END) | (q >= m), n - 1, sl.inst_first[inst]),
     )
     k = jnp.arange(cap)
-    j = jnp.clip(jnp.searchsorted(first, k, side="right") - 1, 0, pinned.shape[0] - 2)
+    j = jnp.clip(last_at_or_before(first, cap), 0, pinned.shape[0] - 2)
     pj = pinned[j]
     at_vertex = (j >= 1) & (j <= m - 2) & (k <= sl.inst_last[jnp.maximum(pj, 0)])
     portal = k < n - 1
