@@ -4,12 +4,12 @@ A corridor is a sequence of faces f_0 … f_{n−1} in which consecutive faces s
 edge, the *portal* k between f_k and f_{k+1}. Travelling from f_0 to f_{n−1}, each
 portal has a left and a right vertex. The unfolding lays f_0 in the plane and every
 next face across its portal, so that the shortest path inside the corridor is a
-polyline of the plane (`jaxgeo._funnel`).
+polyline of the plane (`pull`).
 
 Every vertex *occurrence* gets an instance id: 0 and 1 for portal 0's left and
 right vertex, k + 2 for the vertex of f_{k+1} opposite portal k. A vertex stays the
 same instance over the consecutive portals it belongs to (`inst_first` …
-`inst_last`), which is how the funnel and the flips tell a vertex the path wraps.
+`inst_last`), which is how the string pull and the flips tell a vertex the path wraps.
 
 The unfolding is a `lax.scan` over the fixed capacity (masked past n), so that
 `jax.grad` goes through it: it is also the differentiable length of the frozen
@@ -108,9 +108,9 @@ def unfold(
     live = jnp.arange(cap) < n - 1
     keep_right = jnp.concatenate([right[1:] == right[:-1], jnp.array([False])])
 
-    def step(carry, k):
+    def step(carry, x):
         l2, r2, li, ri = carry
-        ox_k, oy_k, keep_r, alive = ox[k], oy[k], keep_right[k], live[k]
+        k, ox_k, oy_k, keep_r, alive = x
         d = l2 - r2
         nd = safe_norm(d)
         dn = d / jnp.where(nd > 0, nd, 1.0)
@@ -130,7 +130,10 @@ def unfold(
     zero = jnp.zeros(2, dtype)
     l0 = jnp.stack([el[0], jnp.zeros((), dtype)])
     init = (l0, zero, jnp.int32(0), jnp.int32(1))
-    _, (l2, r2, li, ri, w2) = jax.lax.scan(step, init, jnp.arange(cap, dtype=jnp.int32))
+    # the per-portal data as the scan's xs, not indexed inside it: under vmap an
+    # index into a batched closure is a gather per step (4x the cost at 4 lanes)
+    xs = (jnp.arange(cap, dtype=jnp.int32), ox, oy, keep_right, live)
+    _, (l2, r2, li, ri, w2) = jax.lax.scan(step, init, xs)
 
     # instances: 0, 1 = portal 0's ends; k + 2 = vertex opposite portal k
     inst_vertex = jnp.concatenate([jnp.stack([left[0], right[0]]), opp[:-1]])
@@ -291,7 +294,7 @@ def pull(
     sleeves: Sleeve, max_steps: int = 64
 ) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
     """The shortest path inside each sleeve of a lane batch, pinned points as
-    `funnel` gives them, computed in parallel over the portals: starting from the
+    the funnel algorithm gives them, computed in parallel over the portals: starting from the
     straight segment, every step pins in each segment between consecutive pins
     the portal end its line misses by the most, and unpins the points the string
     turns away from. The result is the shortest path when no portal end is

@@ -7,8 +7,8 @@ are unfolded, and passes through a vertex only where the angle on *both* sides o
 it is at least π. Given a corridor (faces f_0 … f_{n−1} from the start's face to the
 end's, consecutive faces sharing an edge):
 
-1. unfold it into the plane and pull the string: the funnel algorithm gives the
-   shortest path inside the corridor and the vertices it wraps (`jaxgeo._sleeve`);
+1. unfold it into the plane and pull the string: `jaxgeo._sleeve.pull` gives the
+   shortest path inside the corridor and the vertices it wraps;
 2. at a wrapped vertex v the path turns by τ, so the angle on the corridor's side is
    π + |τ| and the angle on the other side is Θ(v) − π − |τ| (Θ(v): the sum of v's
    face angles). If that is below π, going round the other side is shorter: the
@@ -21,8 +21,8 @@ end's, consecutive faces sharing an edge):
    possible (or `max_iterations`).
 
 **Starts.** The loop converges to a locally shortest path in the class of its start.
-The starts are graph paths s → landmark → t read from shortest-path forests built
-once per mesh (`jaxgeo._landmarks`): the `max_starts` landmarks that give the
+The starts are graph paths s → landmark → t over vertices and edge midpoints, read
+from shortest-path forests built once per mesh (`jaxgeo._landmarks`): the `max_starts` landmarks that give the
 shortest graph paths, refined as parallel lanes (`jax.vmap`), the shortest result
 kept. Per query there is no graph search: walking a forest costs the path's length.
 
