@@ -293,20 +293,19 @@ def _pull_step(sl: Sleeve, pins, m, tol, angle_tol):
 def pull(
     sleeves: Sleeve, max_steps: int = 64
 ) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
-    """The shortest path inside each sleeve of a lane batch, pinned points as
-    the funnel algorithm gives them, computed in parallel over the portals: starting from the
-    straight segment, every step pins in each segment between consecutive pins
-    the portal end its line misses by the most, and unpins the points the string
-    turns away from. The result is the shortest path when no portal end is
-    missed and every pin is wrapped the right way (a locally shortest path in a
-    simply connected sleeve is the shortest), which is when a step changes
-    nothing. That takes a few steps more than log₂ of the pins; a lane that has
-    not converged in `max_steps` steps returns False (the exact engine then
-    reports the lane as failed: another start may still succeed). It gives the
-    same pins as the sequential funnel of Lee & Preparata (`tests/_funnel.py`,
-    the reference the tests compare it with) in a few dozen vector operations
-    per step instead of one dependent step per portal, which costs ~3.5 µs each
-    on a CPU."""
+    """The shortest path inside each sleeve of a lane batch, pinned points as the funnel
+    algorithm gives them, computed in parallel over the portals: starting from the
+    straight segment, every step pins in each segment between consecutive pins the
+    portal end its line misses by the most, and unpins the points the string turns away
+    from. The result is the shortest path when no portal end is missed and every pin is
+    wrapped the right way (a locally shortest path in a simply connected sleeve is the
+    shortest), which is when a step changes nothing. That takes a few steps more than
+    log₂ of the pins; a lane that has not converged in `max_steps` steps returns False
+    (the exact engine then reports the lane as failed: another start may still succeed).
+    It gives the same pins as the sequential funnel of Lee & Preparata
+    (`tests/_funnel.py`, the reference the tests compare it with) in a few dozen vector
+    operations per step instead of one dependent step per portal, which costs ~3.5 µs
+    each on a CPU."""
     lanes = sleeves.n.shape[0]
     cap = sleeves.left.shape[-1]
     size = cap + 2

@@ -20,11 +20,12 @@ end's, consecutive faces sharing an edge):
    that holds the start and the first that holds the end; repeat until no flip is
    possible (or `max_iterations`).
 
-**Starts.** The loop converges to a locally shortest path in the class of its start.
-The starts are graph paths s → landmark → t over vertices and edge midpoints, read
-from shortest-path forests built once per mesh (`jaxgeo._landmarks`): the `max_starts` landmarks that give the
-shortest graph paths, refined as parallel lanes (`jax.vmap`), the shortest result
-kept. Per query there is no graph search: walking a forest costs the path's length.
+**Starts.** The loop converges to a locally shortest path in the class of its start. The
+starts are graph paths s → landmark → t over vertices and edge midpoints, read from
+shortest-path forests built once per mesh (`jaxgeo._landmarks`): the `max_starts`
+landmarks that give the shortest graph paths, refined as parallel lanes (`jax.vmap`),
+the shortest result kept. Per query there is no graph search: walking a forest costs the
+path's length.
 
 **Gradients.** The discrete choices (corridor, wrapped vertices) are made under
 `stop_gradient`; the length is then recomputed from the live vertices and endpoint
