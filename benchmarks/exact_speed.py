@@ -5,6 +5,7 @@ counters (flip rounds, corridor length) that explain it.
 
     python benchmarks/exact_speed.py                  # 30 single paths, a batch of 256
     python benchmarks/exact_speed.py --pairs 10 --batch 64
+    python benchmarks/exact_speed.py --mesh bone.ply  # a scan shipped with pymeshlab
 
 Printed, not written to RESULTS.md: the figures go into the notes with the command.
 """
@@ -38,10 +39,29 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=30)
     ap.add_argument("--batch", type=int, default=256)
     ap.add_argument("--chunk", type=int, default=64)
+    ap.add_argument(
+        "--mesh",
+        default="catenoid",
+        help="catenoid (20k faces) or a sample mesh of pymeshlab (bone.ply, cow.obj)",
+    )
     args = ap.parse_args()
     import potpourri3d as pp3d
 
-    mesh = jg.Mesh(*surfaces.catenoid(n_around=100, n_height=100))
+    if args.mesh == "catenoid":
+        mesh = jg.Mesh(*surfaces.catenoid(n_around=100, n_height=100))
+    else:
+        import importlib.util
+        import pathlib
+
+        import trimesh
+
+        root = pathlib.Path(importlib.util.find_spec("pymeshlab").origin).parent
+        m = jg.load_mesh(str(root / "tests" / "sample_meshes" / args.mesh))
+        # pygeodesic and potpourri3d refuse unreferenced vertices
+        tm = trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.faces), process=False)
+        tm.remove_unreferenced_vertices()
+        mesh = jg.Mesh(tm.vertices, tm.faces)
+    print(f"{args.mesh}: {mesh.n_faces} faces, {mesh.n_vertices} vertices")
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     rng = np.random.default_rng(0)
     pairs = rng.integers(0, len(v), (max(args.pairs, args.batch), 2))
