@@ -232,6 +232,19 @@ def test_surface_writes_the_shipped_example(tmp_path, capsys):
         assert main(["surface", name, *kv, "-o", str(out)]) == 0
         shipped = jg.example_mesh_path(name)
         # the shipped file is what the command writes (regenerate them with
-        # `python -m jaxgeo.data` if a generator changes)
-        assert out.read_bytes() == open(shipped, "rb").read(), name
+        # `python -m jaxgeo.data` if a generator changes): the same header and
+        # faces, and the same vertices to rounding. Not byte for byte: numpy's
+        # sin/cos differ by an ulp between builds and CPUs (SIMD paths, ≤ 4 ulp),
+        # which changed 52 of 1,391 twin-peak vertices in their last digit here.
+        ours, theirs = out.read_text().splitlines(), open(shipped).read().splitlines()
+        assert len(ours) == len(theirs), name
+        assert [r for r in ours if not r.startswith("v ")] == [
+            r for r in theirs if not r.startswith("v ")
+        ], name
+        a, b = (
+            np.array([r.split()[1:] for r in rows if r.startswith("v ")], float)
+            for rows in (ours, theirs)
+        )
+        extent = np.ptp(b, axis=0).max()
+        np.testing.assert_allclose(a, b, rtol=0, atol=16 * np.finfo(float).eps * extent)
     assert "faces" in capsys.readouterr().out
