@@ -243,7 +243,7 @@ def _detours(mesh: Mesh, theta, corridor, n, s, t, k: int, tol):
     that all reach the same one cannot tell; a detour starts in the other."""
     sl = _sleeve_of(mesh, corridor, n, s, t)
     pinned, m, _ = jax.tree.map(
-        lambda x: x[0], _sleeve.pull(jax.tree.map(lambda x: x[None], sl))
+        lambda x: x[0], _sleeve.taut(jax.tree.map(lambda x: x[None], sl))
     )
     cap = corridor.shape[0]
     inst = jnp.arange(cap + 1)
@@ -369,7 +369,7 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
         sl = jax.vmap(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
             lane.corridor, lane.n, s, t
         )
-        pinned, m, fun_ok = _sleeve.pull(sl)
+        pinned, m, fun_ok = _sleeve.taut(sl)
         length = jax.vmap(_pinned_length)(sl, pinned, m)
         taken, v, a, b, p0, d, count = jax.vmap(
             lambda c, sl_, p, m_: _flips(mesh, theta, c, sl_, p, m_, tol)
@@ -451,7 +451,7 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
     corridor, differentiable in the vertices and the endpoints' barycentrics."""
     sl = _sleeve_of(mesh, corridor, n, s, t)
     one = jax.tree.map(lambda x: x[None], jax.lax.stop_gradient(sl))
-    pinned, m, _ = jax.tree.map(lambda x: x[0], _sleeve.pull(one))
+    pinned, m, _ = jax.tree.map(lambda x: x[0], _sleeve.taut(one))
     length = _pinned_length(sl, pinned, m)
     cap = corridor.shape[0]
     q = jnp.arange(pinned.shape[0])

@@ -1,5 +1,5 @@
 """The parallel string pull (`jaxgeo._sleeve.pull`) against the sequential funnel
-(`tests/_funnel.py`) on the engine's starting corridors: the same pinned points,
+(`jaxgeo._sleeve.funnel`) on the engine's starting corridors: the same pinned points,
 so the same shortest path in every sleeve.
 
 Tolerance: none needed for the pins (integers). The pull decides a portal end is
@@ -19,7 +19,6 @@ import jaxgeo as jg
 from jaxgeo import _sleeve, exact
 from jaxgeo.locate import SurfacePoint
 
-from ._funnel import funnel
 from .helpers import unit_icosphere
 
 CAP = 64
@@ -54,7 +53,7 @@ def test_pull_pins_what_the_funnel_pins():
     usable = valid & (np.asarray(sl.n) >= 2)  # pairs on one face have no portal
     assert usable.mean() >= 0.8
     pins, m, ok = jax.jit(_sleeve.pull)(sl)
-    ref, ref_m, ref_ok = jax.jit(funnel)(sl)
+    ref, ref_m, ref_ok = jax.jit(_sleeve.funnel)(sl)
     assert np.all(np.asarray(ok)[usable]) and np.all(np.asarray(ref_ok)[usable])
     m, ref_m = np.asarray(m), np.asarray(ref_m)
     assert np.array_equal(m[usable], ref_m[usable])
