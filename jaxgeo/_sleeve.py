@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from ._numerics import safe_norm
+from ._numerics import last_at_or_before, safe_norm
 
 
 class Sleeve(eqx.Module):
@@ -346,12 +346,8 @@ def _pull_step(sl: Sleeve, pins, m, tol, angle_tol):
     # segment j runs from pin j to pin j + 1; portal k lies in segment j(k), the
     # last pin whose range ends before k, unless it is in pin j(k)+1's range
     k = jnp.arange(cap)
-    mark = (
-        jnp.full(cap + 1, -1, jnp.int32)
-        .at[jnp.where(live_pin & (j_all < m - 1), b + 1, cap)]
-        .max(j_all.astype(jnp.int32), mode="drop")
-    )
-    seg = jnp.clip(jax.lax.cummax(mark[:cap]), 0, size - 2)
+    starts = jnp.where(live_pin & (j_all < m - 1), b + 1, cap)
+    seg = jnp.clip(last_at_or_before(starts, cap), 0, size - 2)
     portal_live = (k < sl.n - 1) & (k > b[seg]) & (k < a[seg + 1])
     P, Q = xy[seg], xy[seg + 1]
     d = Q - P
