@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from ._numerics import run_of
 from .mesh import Mesh
@@ -91,16 +91,33 @@ def face_fan_position(mesh: Mesh, face, vertex):
     return mesh.corner_fan_pos[face, corner]
 
 
-def _turn(n, closed, p_from, p_to_ccw, p_to_cw):
+def _turn(n, closed, p_from, p_to_ccw, p_to_cw, fan_angle):
     """Faces counted from position p_from round a fan of n faces to p_to_ccw going
-    counter-clockwise or to p_to_cw going clockwise (the shorter; an open fan only
-    where it does not cross the boundary): (direction ±1, count)."""
+    counter-clockwise or to p_to_cw going clockwise: (direction ±1, count, whether
+    either way exists). The way with the smaller angle at the vertex (`fan_angle`:
+    the corner angle of each fan face; the first and last face count half, as the
+    path's segments cut them) is taken: the string pulled taut through it cuts
+    the corner shorter, and the choice does not depend on the direction the path
+    is walked (a count of faces does, at ties). An open fan is turned only where
+    the way does not cross the boundary."""
     n_ = jnp.maximum(n, 1)
     ccw = jnp.where(closed, (p_to_ccw - p_from) % n_, p_to_ccw - p_from) + 1
     cw = jnp.where(closed, (p_from - p_to_cw) % n_, p_from - p_to_cw) + 1
     ccw_ok = closed | (p_to_ccw >= p_from)
     cw_ok = closed | (p_to_cw <= p_from)
-    use_ccw = ccw_ok & (~cw_ok | (ccw <= cw))
+    k = jnp.arange(fan_angle.shape[0])
+    off_ccw = jnp.where(closed, (k - p_from) % n_, k - p_from)
+    off_cw = jnp.where(closed, (p_from - k) % n_, p_from - k)
+    width = fan_angle.shape[0]
+    first = fan_angle[jnp.clip(p_from, 0, width - 1)]
+
+    def angle(off, count, p_to):
+        inside = (off >= 0) & (off < count) & (k < n)
+        last = fan_angle[jnp.clip(p_to, 0, width - 1)]
+        return jnp.sum(jnp.where(inside, fan_angle, 0.0)) - 0.5 * (first + last)
+
+    smaller = angle(off_ccw, ccw, p_to_ccw) <= angle(off_cw, cw, p_to_cw)
+    use_ccw = ccw_ok & (~cw_ok | smaller)
     direction = jnp.where(use_ccw, 1, -1).astype(jnp.int32)
     count = jnp.where(use_ccw, ccw, cw).astype(jnp.int32)
     return direction, count, ccw_ok | cw_ok
@@ -122,6 +139,7 @@ def _common_face(mesh: Mesh, e1, e2):
 
 def corridor_from_nodes(
     mesh: Mesh,
+    corner_angles: Float[Array, "F 3"],
     path: Int[Array, " P"],
     count: Int[Array, ""],
     start_face: Int[Array, ""],
@@ -130,8 +148,9 @@ def corridor_from_nodes(
 ) -> tuple[Int[Array, " cap"], Int[Array, ""], Bool[Array, ""]]:
     """A face corridor that follows a graph path (`node_path`; its first and last
     nodes are vertices of start_face and end_face): round each vertex through its
-    fan, the shorter way, from the face it was entered by to a face of the next
-    segment; across each midpoint's edge into the face of the next segment."""
+    fan, the way of the smaller angle (`corner_angles` of the mesh), from the face
+    it was entered by to a face of the next segment; across each midpoint's edge
+    into the face of the next segment."""
     width = mesh.fan_faces.shape[1]
 
     def body(i, s):
@@ -168,7 +187,10 @@ def corridor_from_nodes(
             ),
         )
         to_cw = jnp.where(last, p_end, jnp.where(to_vertex, q, p_seg))
-        d, cnt, turn_ok = _turn(n, closed, p_e, to_ccw, to_cw)
+        fan = mesh.fan_faces[v]
+        corner = jnp.argmax(mesh.faces[jnp.maximum(fan, 0)] == v, axis=1)
+        fan_angle = jnp.where(fan >= 0, corner_angles[jnp.maximum(fan, 0), corner], 0)
+        d, cnt, turn_ok = _turn(n, closed, p_e, to_ccw, to_cw, fan_angle)
         exit_pos = jnp.where(d > 0, to_ccw, to_cw)
         exit_face = mesh.fan_faces[v, jnp.clip(exit_pos, 0, width - 1)]
         skip = (i > 0).astype(jnp.int32)  # the face entered by is in already

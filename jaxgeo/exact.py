@@ -47,6 +47,7 @@ from ._numerics import last_at_or_before, run_of, safe_norm
 from ._starts import best_slots, corridor_from_nodes, face_fan_position, node_path
 from .locate import SurfacePoint, snap
 from .mesh import Mesh
+from .normals import corner_angles
 from .path import EDGE, FACE, VERTEX, Status
 
 __all__ = ["ExactStats", "exact_solve", "vertex_angle_sums"]
@@ -67,11 +68,11 @@ class ExactStats(eqx.Module):
 
 def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
     """Θ(v): the sum of the face angles at every vertex."""
-    p = vertices[faces]  # (F, 3, 3)
-    a = jnp.roll(p, -1, axis=1) - p
-    b = jnp.roll(p, 1, axis=1) - p
-    ang = jnp.arctan2(safe_norm(jnp.cross(a, b)), jnp.sum(a * b, -1))
-    return jnp.zeros(vertices.shape[0], vertices.dtype).at[faces].add(ang)
+    return _angle_sums(vertices, faces, corner_angles(vertices, faces))
+
+
+def _angle_sums(vertices, faces, angles):
+    return jnp.zeros(vertices.shape[0], vertices.dtype).at[faces].add(angles)
 
 
 # ------------------------------------------------------------------- endpoints
@@ -419,11 +420,13 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
     return eqx.tree_at(lambda x: x.status, lane, status)
 
 
-def _start(mesh, slot, slot_ok, vs, vt, s, t, cap):
+def _start(mesh, angles, slot, slot_ok, vs, vt, s, t, cap):
     """A starting corridor from the forest path of `slot` from vertex vs (of the
     start's face) to vt (of the end's face); one lane."""
     path, count, path_ok = node_path(mesh, slot, vs, vt, cap)
-    corridor, n, c_ok = corridor_from_nodes(mesh, path, count, s.face, t.face, cap)
+    corridor, n, c_ok = corridor_from_nodes(
+        mesh, angles, path, count, s.face, t.face, cap
+    )
     status0 = jnp.where(
         ~slot_ok, Status.REFINE_FAILED, jnp.where(path_ok & c_ok, -1, Status.MAX_STEPS)
     )
@@ -546,7 +549,8 @@ def exact_solve(
     sg = jax.lax.stop_gradient
     smesh = sg(mesh)
     ss, ts = sg(s), sg(t)
-    theta = vertex_angle_sums(smesh.vertices, smesh.faces)
+    angles = corner_angles(smesh.vertices, smesh.faces)
+    theta = _angle_sums(smesh.vertices, smesh.faces, angles)
 
     def graph_vertex(e: _End):
         return smesh.faces[e.face, jnp.argmax(e.bary)]
@@ -559,7 +563,7 @@ def exact_solve(
         return jnp.repeat(x, k, axis=0)
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
-    corridor, n, status0 = jax.vmap(lambda *x: _start(smesh, *x, cap))(
+    corridor, n, status0 = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(
         slots.reshape(-1), slot_ok.reshape(-1), lanes_of(vs), lanes_of(vt), s_l, t_l
     )
     lanes = _refine(smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol)

@@ -46,7 +46,10 @@ def face_normals(
     return safe_normalize(n) if unit else n
 
 
-def _corner_angles(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
+def corner_angles(
+    vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]
+) -> Float[Array, "F 3"]:
+    """The angle of every face at each of its corners (differentiable)."""
     p = vertices[faces]  # (F, 3, 3)
     e1 = safe_normalize(jnp.roll(p, -1, axis=1) - p)
     e2 = safe_normalize(jnp.roll(p, 1, axis=1) - p)
@@ -87,7 +90,7 @@ def vertex_normals(
         w = jnp.broadcast_to(n[:, None, :], (*faces.shape, 3))
     elif weighting == "angle":
         n = face_normals(vertices, faces)
-        w = n[:, None, :] * _corner_angles(vertices, faces)[..., None]
+        w = n[:, None, :] * corner_angles(vertices, faces)[..., None]
     else:
         raise JaxgeoError(
             f"unknown normal weighting {weighting!r}; expected 'uniform', 'area' or "

@@ -18,14 +18,16 @@ import numpy as np
 import jaxgeo as jg
 from jaxgeo import _sleeve, exact
 from jaxgeo.locate import SurfacePoint
+from jaxgeo.normals import corner_angles
 
 from .helpers import unit_icosphere
 
 CAP = 64
 
 
-def _sleeves(mesh: jg.Mesh, pairs: np.ndarray) -> _sleeve.Sleeve:
-    """Unfolded starting corridors (one landmark start each) of vertex pairs."""
+def _starts(mesh: jg.Mesh, pairs: np.ndarray):
+    """The cleaned starting corridors (one landmark start each) of vertex pairs,
+    and their ends."""
 
     def one(a, b):
         s = exact._end(mesh, SurfacePoint.vertex(mesh, a))
@@ -33,11 +35,18 @@ def _sleeves(mesh: jg.Mesh, pairs: np.ndarray) -> _sleeve.Sleeve:
         vs = mesh.faces[s.face, jnp.argmax(s.bary)]
         vt = mesh.faces[t.face, jnp.argmax(t.bary)]
         slots, ok = exact.best_slots(mesh, vs, vt, 1)
-        corridor, n, _ = exact._start(mesh, slots[0], ok[0], vs, vt, s, t, CAP)
+        angles = corner_angles(mesh.vertices, mesh.faces)
+        corridor, n, _ = exact._start(mesh, angles, slots[0], ok[0], vs, vt, s, t, CAP)
         return corridor, n, s, t
 
     corridor, n, s, t = jax.vmap(one)(pairs[:, 0], pairs[:, 1])
     corridor, n = exact._clean(mesh, corridor, n, s, t)
+    return corridor, n, s, t
+
+
+def _sleeves(mesh: jg.Mesh, pairs: np.ndarray) -> _sleeve.Sleeve:
+    """Unfolded starting corridors (one landmark start each) of vertex pairs."""
+    corridor, n, s, t = _starts(mesh, pairs)
     return jax.vmap(lambda c, m, s_, t_: exact._sleeve_of(mesh, c, m, s_, t_))(
         corridor, n, s, t
     )
