@@ -40,3 +40,15 @@ def run_of(counts: Int[Array, " N"], size: int) -> Int[Array, " size"]:
     slots): the run slot j is in (for j past the end: the last non-empty run)."""
     starts = jnp.cumsum(counts) - counts
     return jnp.maximum(last_at_or_before(jnp.where(counts > 0, starts, size), size), 0)
+
+
+def corner_angles(
+    vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]
+) -> Float[Array, "F 3"]:
+    """The angle of every face at each of its corners (differentiable)."""
+    p = vertices[faces]  # (F, 3, 3)
+    e1 = safe_normalize(jnp.roll(p, -1, axis=1) - p)
+    e2 = safe_normalize(jnp.roll(p, 1, axis=1) - p)
+    cos = jnp.clip(jnp.sum(e1 * e2, -1), -1.0, 1.0)
+    sin = safe_norm(jnp.cross(e1, e2))  # finite gradient even at sin = 0
+    return jnp.arctan2(sin, cos)  # (F, 3)

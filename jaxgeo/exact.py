@@ -43,11 +43,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from . import _sleeve
-from ._numerics import last_at_or_before, run_of, safe_norm
+from ._numerics import corner_angles, last_at_or_before, run_of, safe_norm
 from ._starts import best_slots, corridor_from_nodes, face_fan_position, node_path
 from .locate import SurfacePoint, snap
 from .mesh import Mesh
-from .normals import corner_angles
 from .path import EDGE, FACE, VERTEX, Status
 
 __all__ = ["ExactStats", "exact_solve", "vertex_angle_sums"]

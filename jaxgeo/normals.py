@@ -10,7 +10,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from ._errors import JaxgeoError
-from ._numerics import safe_norm, safe_normalize
+from ._numerics import corner_angles, safe_normalize
 
 if TYPE_CHECKING:
     from .mesh import Mesh
@@ -44,18 +44,6 @@ def face_normals(
     a, b, c = (vertices[faces[:, i]] for i in range(3))
     n = jnp.cross(b - a, c - a)
     return safe_normalize(n) if unit else n
-
-
-def corner_angles(
-    vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]
-) -> Float[Array, "F 3"]:
-    """The angle of every face at each of its corners (differentiable)."""
-    p = vertices[faces]  # (F, 3, 3)
-    e1 = safe_normalize(jnp.roll(p, -1, axis=1) - p)
-    e2 = safe_normalize(jnp.roll(p, 1, axis=1) - p)
-    cos = jnp.clip(jnp.sum(e1 * e2, -1), -1.0, 1.0)
-    sin = safe_norm(jnp.cross(e1, e2))  # finite gradient even at sin = 0
-    return jnp.arctan2(sin, cos)  # (F, 3)
 
 
 def vertex_normals(

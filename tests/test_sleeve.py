@@ -17,8 +17,8 @@ import numpy as np
 
 import jaxgeo as jg
 from jaxgeo import _sleeve, exact
+from jaxgeo._numerics import corner_angles
 from jaxgeo.locate import SurfacePoint
-from jaxgeo.normals import corner_angles
 
 from .helpers import unit_icosphere
 
