@@ -236,15 +236,13 @@ def _other_way(mesh: Mesh, corridor, v, a, b):
     return p0, -d, ((p0 - p1) * d) % nv + 1
 
 
-def _detours(mesh: Mesh, theta, corridor, n, s, t, k: int, tol):
+def _detours(mesh: Mesh, theta, corridor, n, pinned, m, s, t, k: int, tol):
     """k corridors that pass the converged path's nearest walls of positive
     curvature on their other side (one vertex each). Where every vertex round
     the path is a cone point several locally shortest paths exist, and starts
-    that all reach the same one cannot tell; a detour starts in the other."""
+    that all reach the same one cannot tell; a detour starts in the other.
+    `pinned`, `m`: the converged path's taut string, as `_refine` left it."""
     sl = _sleeve_of(mesh, corridor, n, s, t)
-    pinned, m, _ = jax.tree.map(
-        lambda x: x[0], _sleeve.taut(jax.tree.map(lambda x: x[None], sl))
-    )
     cap = corridor.shape[0]
     inst = jnp.arange(cap + 1)
     v = sl.inst_vertex
@@ -352,6 +350,8 @@ def _sleeve_of(mesh: Mesh, corridor, n, s: _End, t: _End):
 class _Lane(eqx.Module):
     corridor: Int[Array, " C"]
     n: Int[Array, ""]
+    pinned: Int[Array, " C+2"]  # the taut string's pins (`_sleeve.taut`)
+    m: Int[Array, ""]
     length: Float[Array, ""]
     iterations: Int[Array, ""]
     flips: Int[Array, ""]
@@ -390,6 +390,8 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
         return _Lane(
             corridor=jnp.where(stop[:, None], lane.corridor, new).astype(jnp.int32),
             n=jnp.where(stop, lane.n, new_n).astype(jnp.int32),
+            pinned=jnp.where(active[:, None], pinned, lane.pinned),
+            m=jnp.where(active, m, lane.m),
             length=jnp.where(active, length, lane.length),
             iterations=(lane.iterations + active).astype(jnp.int32),
             flips=lane.flips + jnp.where(stop, 0, n_taken),
@@ -403,10 +405,12 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
         return jnp.any(~lane.done & (lane.iterations < max_iterations))
 
     corridor, n = _clean(mesh, corridor, n, s, t)
-    lanes = n.shape[0]
+    lanes, cap = corridor.shape
     init = _Lane(
         corridor=corridor,
         n=n,
+        pinned=jnp.full((lanes, cap + 2), _sleeve.END, jnp.int32),
+        m=jnp.zeros(lanes, jnp.int32),
         length=jnp.full(lanes, jnp.inf, dtype),
         iterations=jnp.zeros(lanes, jnp.int32),
         flips=jnp.zeros(lanes, jnp.int32),
@@ -562,43 +566,92 @@ def exact_solve(
         return jnp.repeat(x, k, axis=0)
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
-    corridor, n, status0 = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(
+    starts = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(
         slots.reshape(-1), slot_ok.reshape(-1), lanes_of(vs), lanes_of(vt), s_l, t_l
     )
-    lanes = _refine(smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol)
-    lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
-    win, found = _shortest(lanes)
-    outgrew = jnp.any(lanes.status == Status.MAX_STEPS, axis=1)
-    for _ in range(detour_rounds if detours else 0):
-        # from the best path so far, the other side of its nearest cones
+    # Phase 0 refines the k starts of every pair; then each of `detour_rounds`
+    # rounds takes the detours of the best path so far, k at a time. All phases
+    # run through one `_refine` inside a fori_loop: it is the bulk of the program,
+    # and compiled once instead of once per phase (a third of the compile time).
+    chunks = -(-detours // k) if detours else 0
+    phases = 1 + chunks * (detour_rounds if detours else 0)
+
+    def detours_of(win: _Lane):
         corridor, n, fits, valid = jax.vmap(
-            lambda c, m, a, b: _detours(smesh, theta, c, m, a, b, detours, tol)
-        )(win.corridor, win.n, ss, ts)
-        s_d = jax.tree.map(lambda x: jnp.repeat(x, detours, axis=0), ss)
-        t_d = jax.tree.map(lambda x: jnp.repeat(x, detours, axis=0), ts)
-        corridor, n = _clean(smesh, corridor.reshape(-1, cap), n.reshape(-1), s_d, t_d)
+            lambda c, m_, p, pm, a, b: _detours(
+                smesh, theta, c, m_, p, pm, a, b, chunks * k, tol
+            )
+        )(win.corridor, win.n, win.pinned, win.m, ss, ts)
         status0 = jnp.where(
-            valid.reshape(-1),
-            jnp.where(fits.reshape(-1), -1, Status.MAX_STEPS),
+            valid,
+            jnp.where(fits, -1, Status.MAX_STEPS),
             Status.REFINE_FAILED,  # fewer candidate cones than detours
-        ).astype(jnp.int32)
-        more = _refine(
-            smesh, theta, corridor, n, status0, s_d, t_d, max_iterations, tol
         )
-        more = jax.tree.map(lambda x: x.reshape((n_pairs, detours) + x.shape[1:]), more)
-        both = jax.tree.map(
-            lambda x, y: jnp.stack([x, y], axis=1), win, _shortest(more)[0]
+        chunk = jnp.arange(chunks * k) < detours  # beyond `detours`: unused
+        status0 = jnp.where(chunk, status0, Status.REFINE_FAILED)
+        return corridor, n, status0.astype(jnp.int32)
+
+    def phase(p, carry):
+        win, found, outgrew, converged, first_status, pending = carry
+        j = (p - 1) % max(chunks, 1)
+        if chunks:
+            pending = jax.lax.cond(
+                (p >= 1) & (j == 0), lambda: detours_of(win), lambda: pending
+            )
+        part = jax.tree.map(
+            lambda x: jax.lax.dynamic_slice_in_dim(x, j * k, k, axis=1).reshape(
+                (n_pairs * k,) + x.shape[2:]
+            ),
+            pending,
         )
-        win, found2 = _shortest(both)
-        found = found | found2
-        outgrew = outgrew | jnp.any(more.status == Status.MAX_STEPS, axis=1)
-    status = jnp.where(found, Status.SUCCESS, lanes.status[:, 0])
-    good = lanes.status == Status.SUCCESS
+        corridor, n, status0 = jax.tree.map(
+            lambda a, b: jnp.where(p == 0, a, b), starts, part
+        )
+        lanes = _refine(
+            smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol
+        )
+        lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
+        best, ok = _shortest(lanes)
+        both = jax.tree.map(lambda x, y: jnp.stack([x, y], axis=1), win, best)
+        win, _ = _shortest(both)
+        good = lanes.status == Status.SUCCESS
+        return (
+            win,
+            found | ok,
+            outgrew | jnp.any(lanes.status == Status.MAX_STEPS, axis=1),
+            jnp.where(p == 0, jnp.sum(good, axis=1, dtype=jnp.int32), converged),
+            jnp.where(p == 0, lanes.status[:, 0], first_status),
+            pending,
+        )
+
+    no_win = _Lane(
+        corridor=jnp.full((n_pairs, cap), -1, jnp.int32),
+        n=jnp.zeros(n_pairs, jnp.int32),
+        pinned=jnp.full((n_pairs, cap + 2), _sleeve.END, jnp.int32),
+        m=jnp.zeros(n_pairs, jnp.int32),
+        length=jnp.full(n_pairs, jnp.inf, dtype),
+        iterations=jnp.zeros(n_pairs, jnp.int32),
+        flips=jnp.zeros(n_pairs, jnp.int32),
+        status=jnp.full(n_pairs, Status.REFINE_FAILED, jnp.int32),
+        done=jnp.ones(n_pairs, bool),
+    )
+    no = jnp.zeros(n_pairs, bool)
+    width = max(chunks, 1) * k  # (with no detours, one unused chunk)
+    pending = (
+        jnp.full((n_pairs, width, cap), -1, jnp.int32),
+        jnp.zeros((n_pairs, width), jnp.int32),
+        jnp.full((n_pairs, width), Status.REFINE_FAILED, jnp.int32),
+    )
+    init = (no_win, no, no, jnp.zeros(n_pairs, jnp.int32), no.astype(jnp.int32))
+    win, found, outgrew, converged, first_status, _ = jax.lax.fori_loop(
+        0, phases, phase, init + (pending,)
+    )
+    status = jnp.where(found, Status.SUCCESS, first_status)
     stats = ExactStats(
         iterations=win.iterations,
         flips=win.flips,
         starts=jnp.sum(slot_ok, axis=1, dtype=jnp.int32),
-        starts_converged=jnp.sum(good, axis=1, dtype=jnp.int32),
+        starts_converged=converged,
         corridor_length=win.n,
         outgrew=outgrew.astype(jnp.int32),
     )
