@@ -137,9 +137,10 @@ def main() -> None:
         f"Command: `python benchmarks/bench_exact.py --pairs {args.pairs} "
         f"--batch {args.batch}`",
         "",
-        f"Machine: {platform.platform()}, {os.cpu_count()} CPUs, jax {jax.__version__}, "
-        f"backend {jax.default_backend()}. Random vertex pairs drawn uniformly; times "
-        "are medians after the first call; MMP accuracy on the first 20 pairs.",
+        f"Machine: {platform.platform()}, {os.cpu_count()} CPUs, "
+        f"jax {jax.__version__}, backend {jax.default_backend()}. "
+        "Random vertex pairs drawn uniformly; times are medians after the first "
+        "call; MMP accuracy on the first 20 pairs.",
         "",
         "| " + " | ".join(cols) + " |",
         "|" + "---|" * len(cols),

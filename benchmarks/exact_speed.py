@@ -44,8 +44,14 @@ def main() -> None:
         default="catenoid",
         help="catenoid (20k faces) or a sample mesh of pymeshlab (bone.ply, cow.obj)",
     )
+    ap.add_argument(
+        "--starts", type=int, default=None, help="Exact(max_starts=...) (default: its)"
+    )
     args = ap.parse_args()
     import potpourri3d as pp3d
+
+    method = jg.Exact() if args.starts is None else jg.Exact(max_starts=args.starts)
+    print(method)
 
     if args.mesh == "catenoid":
         mesh = jg.Mesh(*surfaces.catenoid(n_around=100, n_height=100))
@@ -76,12 +82,12 @@ def main() -> None:
     )
 
     t = clocks()
-    jg.shortest_path(mesh, int(pairs[0, 0]), int(pairs[0, 1]))
+    jg.shortest_path(mesh, int(pairs[0, 0]), int(pairs[0, 1]), method=method)
     print(f"exact: compile + first path {since(t)[0]:.1f} s wall")
     cpu, rounds, corridor = [], [], []
     for a, b in pairs[: args.pairs]:
         t = clocks()
-        p = jg.shortest_path(mesh, int(a), int(b))
+        p = jg.shortest_path(mesh, int(a), int(b), method=method)
         jax.block_until_ready(p.length)
         cpu.append(since(t)[1])
         rounds.append(int(p.stats["iterations"]))
@@ -95,9 +101,10 @@ def main() -> None:
     )
 
     p1, p2 = pairs[: args.batch, 0], pairs[: args.batch, 1]
-    jg.shortest_paths(mesh, p1[: args.chunk], p2[: args.chunk], chunk_size=args.chunk)
+    kw = dict(chunk_size=args.chunk, method=method)
+    jg.shortest_paths(mesh, p1[: args.chunk], p2[: args.chunk], **kw)
     t = clocks()
-    out = jg.shortest_paths(mesh, p1, p2, chunk_size=args.chunk, throw=False)
+    out = jg.shortest_paths(mesh, p1, p2, throw=False, **kw)
     bw, bc = since(t)
     print(
         f"exact batch of {args.batch} (chunks of {args.chunk}): {args.batch / bc:.1f} "
