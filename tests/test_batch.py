@@ -25,12 +25,13 @@ def _pairs(n, seed):
     return p / np.linalg.norm(p, axis=-1, keepdims=True)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_batch_equals_single_paths():
     p1, p2 = _pairs(7, 0)
-    paths = jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128)
-    assert paths.points.shape == (7, 128, 3)
+    paths = jg.shortest_paths(MESH, p1, p2, chunk_size=4)
+    assert paths.points.shape == (7, 1024, 3)
     for i in range(7):
-        single = jg.shortest_path(MESH, p1[i], p2[i], max_points=128)
+        single = jg.shortest_path(MESH, p1[i], p2[i])
         n = int(single.count)
         assert n == int(paths.count[i])
         # The batch runs one loop over all lanes (`trace_batch`); lanes that finish
@@ -41,17 +42,18 @@ def test_batch_equals_single_paths():
         np.testing.assert_allclose(paths.length[i], float(single.length), rtol=1e-12)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_new_batch_sizes_do_not_recompile(caplog):
     p1, p2 = _pairs(9, 1)
-    jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128)  # compiles
-    jg.shortest_path(MESH, p1[0], p2[0], max_points=128)
+    jg.shortest_paths(MESH, p1, p2, chunk_size=4)  # compiles
+    jg.shortest_path(MESH, p1[0], p2[0])
     with jax.log_compiles(True), caplog.at_level(logging.WARNING):
         caplog.clear()
-        jg.shortest_paths(MESH, p1[:5], p2[:5], chunk_size=4, max_points=128)
-        jg.shortest_paths(MESH, p1[:3], p2[:3], chunk_size=4, max_points=128)
+        jg.shortest_paths(MESH, p1[:5], p2[:5], chunk_size=4)
+        jg.shortest_paths(MESH, p1[:3], p2[:3], chunk_size=4)
         # nor does a new max_distance (an array argument, not a static one)
-        jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128, max_distance=2)
-        jg.shortest_path(MESH, p1[1], p2[1], max_points=128, max_distance=2)
+        jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_distance=2)
+        jg.shortest_path(MESH, p1[1], p2[1], max_distance=2)
     compiles = [r for r in caplog.records if "Compiling" in r.getMessage()]
     assert not compiles, [r.getMessage()[:120] for r in compiles]
 
@@ -76,14 +78,14 @@ def test_small_batch_does_not_pay_for_the_padding(caplog):
     equal the padded run's (a 4-chunk with 1 padded lane, and the second chunk of a
     batch of 7 in chunks of 4, 3 padded lanes) bit for bit: lanes are independent."""
     p1, p2 = _pairs(7, 0)
-    padded = jg.shortest_paths(MESH, p1, p2, chunk_size=4, max_points=128)
+    padded = jg.shortest_paths(MESH, p1, p2, chunk_size=4)
     with jax.log_compiles(True), caplog.at_level(logging.WARNING):
         caplog.clear()
-        head = jg.shortest_paths(MESH, p1[:3], p2[:3], max_points=128)
-        tail = jg.shortest_paths(MESH, p1[4:], p2[4:], max_points=128)
+        head = jg.shortest_paths(MESH, p1[:3], p2[:3])
+        tail = jg.shortest_paths(MESH, p1[4:], p2[4:])
     compiles = [r for r in caplog.records if "Compiling" in r.getMessage()]
     assert not compiles, [r.getMessage()[:120] for r in compiles]
-    assert head.points.shape == (3, 128, 3)
+    assert head.points.shape == (3, 1024, 3)
     for got, rows in ((head, slice(0, 3)), (tail, slice(4, 7))):
         for want, have in zip(
             jax.tree.leaves(jax.tree.map(lambda x, r=rows: x[r], padded)),
@@ -106,8 +108,8 @@ def test_bad_batches_raise():
     with pytest.raises(
         jg.JaxgeoError, match=r"3 of 3 paths failed \(FAR_FROM_SURFACE\)"
     ):
-        jg.shortest_paths(MESH, far, p2, chunk_size=4, max_points=128)
-    out = jg.shortest_paths(MESH, far, p2, chunk_size=4, max_points=128, throw=False)
+        jg.shortest_paths(MESH, far, p2, chunk_size=4)
+    out = jg.shortest_paths(MESH, far, p2, chunk_size=4, throw=False)
     assert np.all(out.status == jg.Status.FAR_FROM_SURFACE)
 
 
@@ -122,8 +124,8 @@ SHARDED = textwrap.dedent(
     rng = np.random.default_rng(0)
     p = rng.normal(size=(2, 10, 3))
     p /= np.linalg.norm(p, axis=-1, keepdims=True)
-    a = jg.shortest_paths(mesh, p[0], p[1], chunk_size=4, max_points=128)
-    b = jg.shortest_paths(mesh, p[0], p[1], chunk_size=4, max_points=128, shard=False)
+    a = jg.shortest_paths(mesh, p[0], p[1], chunk_size=4)
+    b = jg.shortest_paths(mesh, p[0], p[1], chunk_size=4, shard=False)
     np.testing.assert_array_equal(a.count, b.count)
     np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-14)
     print("sharded ok")
@@ -148,6 +150,7 @@ def test_sharded_batch_equals_unsharded():
     assert "sharded ok" in out.stdout
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_symmetric_catenoid_pair_through_the_axis_completes():
     """Endpoints point-symmetric about the catenoid's centre: the chord runs through
     the axis, where every normal line meets it. The trace once bounced between two

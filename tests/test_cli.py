@@ -44,6 +44,7 @@ def test_path_format_json_goes_to_stdout_summary_to_stderr(capsys):
     assert "length" in err
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_path_on_mesh_file_writes_obj(sphere_file, tmp_path, capsys):
     out = tmp_path / "seam.obj"
     args = ["path", str(sphere_file), "--from", "1", "0", "0", "--to", "0", "1", "0"]
@@ -56,6 +57,7 @@ def test_path_on_mesh_file_writes_obj(sphere_file, tmp_path, capsys):
     assert "length" in stdout and "written to" in stdout
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_vertex_endpoints_give_the_path_between_the_vertices(sphere_file, capsys):
     mesh = jg.load_mesh(sphere_file)
     v = np.asarray(mesh.vertices)
@@ -79,6 +81,7 @@ def test_vertex_out_of_range_is_a_usage_error_naming_the_option(sphere_file, cap
     assert "--to-vertex: vertex 162 is out of range [0, 162)" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_far_point_is_a_clear_error(sphere_file, capsys):
     code = main(["path", str(sphere_file), "--from", "0", "0", "5", "--to", "0", "1"])
     assert code == 2  # usage error: --to takes three numbers
@@ -123,6 +126,7 @@ def test_help_exits_0_and_every_option_says_its_default(capsys):
                 assert "default" in action.help, f"{name} {action.dest}"
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_method_default_is_the_librarys_and_is_passed_on(monkeypatch, capsys):
     import inspect
 
@@ -149,6 +153,7 @@ def _pairs(n: int, seed: int = 0) -> np.ndarray:
     return (p / np.linalg.norm(p, axis=-1, keepdims=True)).reshape(n, 6)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_paths_batch_from_csv_with_header(sphere_file, tmp_path, capsys):
     pairs = tmp_path / "pairs.csv"
     np.savetxt(pairs, _pairs(5), delimiter=",", header="x1,y1,z1,x2,y2,z2", comments="")
@@ -164,6 +169,7 @@ def test_paths_batch_from_csv_with_header(sphere_file, tmp_path, capsys):
     assert "5/5 paths" in stderr and "5 paths complete, 0 failed" in stdout
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_paths_leaves_failed_rows_empty_and_writes_points(
     sphere_file, tmp_path, capsys
 ):
@@ -210,6 +216,7 @@ def test_paths_leaves_failed_rows_empty_and_writes_points(
             assert seg == pytest.approx(float(row[2]), rel=1e-12)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_paths_accepts_vertex_index_pairs(sphere_file, tmp_path, capsys):
     pairs = tmp_path / "pairs.csv"
     pairs.write_text("i,j\n0,10\n5,100\n")

@@ -142,6 +142,7 @@ def test_bad_endpoint_arrays_raise(bad, message):
             jg.shortest_path(FLAT, *args)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_endpoints_as_lists_and_integers_work():
     path = ok(jg.shortest_path(FLAT, list(A), tuple(B)))
     np.testing.assert_allclose(float(path.length), np.linalg.norm(B - A), rtol=1e-12)
@@ -236,6 +237,7 @@ def test_nan_point_is_infinitely_far_under_jit():
     "where",
     ["face", "interior edge", "interior vertex", "boundary edge", "corner"],
 )
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_identical_endpoints_give_length_zero(where):
     v = V(FLAT)
     p = {
@@ -266,6 +268,7 @@ def test_identical_surface_points_give_length_zero():
         ("boundary edge", "boundary edge"),
     ],
 )
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_endpoints_on_vertices_edges_and_boundary(start, end):
     """On the flat square (convex) the geodesic is the segment: the length is the
     chord to rounding whatever element the endpoints lie on."""

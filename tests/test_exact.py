@@ -25,7 +25,7 @@ from jaxgeo.locate import SurfacePoint
 from .helpers import package_mesh, unit_icosphere
 
 EQUAL = 1e-9  # relative: the acceptance bound (see the module docstring)
-POINTS = 256  # one path capacity for every test: compiled shapes are reused
+POINTS = 1024  # the default max_points: compiled shapes shared with other test files
 
 
 def vertex_point(mesh: jg.Mesh, v: int) -> SurfacePoint:
@@ -95,10 +95,12 @@ def _assert_exact(rel: np.ndarray, rate: float) -> None:
     ],
     ids=["catenoid", "holed-plate"],
 )
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_equals_mmp_on_random_vertex_pairs(make):
     _assert_exact(_compare(make(), 40, seed=0), rate=0.97)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_equals_mmp_on_a_coarse_sphere():
     """Every vertex a cone point: several locally shortest paths; without the
     detours the landmark starts reached the wrong one on 15 % of these pairs."""
@@ -144,6 +146,7 @@ def test_no_host_callback_and_one_compiled_loop():
     assert "callback" not in str(batched)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_jit_vmap_matches_single_calls():
     mesh = unit_icosphere(2)
     v = np.asarray(mesh.vertices)
@@ -156,6 +159,7 @@ def test_jit_vmap_matches_single_calls():
     np.testing.assert_allclose(batch, single, rtol=1e-12)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_gradient_matches_central_differences():
     """d length / d vertices and d length / d endpoint barycentrics, against
     central differences of step 1e-6 (truncation ~1e-12, rounding ~1e-10 /
@@ -208,6 +212,7 @@ def test_points_lie_on_their_elements_and_sum_to_the_length():
     assert p.stats["starts"] >= 1 and p.stats["iterations"] >= 1
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_same_face_and_identical_endpoints():
     mesh = unit_icosphere(2)
     sp = SurfacePoint(jnp.asarray(5), jnp.asarray([0.2, 0.3, 0.5]))
@@ -219,6 +224,7 @@ def test_same_face_and_identical_endpoints():
     assert abs(float(p.length) - chord) <= 1e-15 * 10
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_method_objects_carry_options():
     mesh = unit_icosphere(2)
     v = np.asarray(mesh.vertices)

@@ -193,6 +193,7 @@ def contract(jacobian, direction):
 
 
 @pytest.mark.parametrize("name", ["sphere", "cone"])
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_grad_of_path_length_on_the_shared_connectivity(name):
     """The fast set's part: `jax.grad` of `path_length` w.r.t. the vertices and
     the start's barycentrics, against central differences, on the sphere zone and

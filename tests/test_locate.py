@@ -12,6 +12,7 @@ from .helpers import unit_icosphere
 MESH = unit_icosphere(2)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_locate_recovers_face_and_barycentrics():
     rng = np.random.default_rng(0)
     v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)

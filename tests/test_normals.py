@@ -276,6 +276,7 @@ def _catenoid_normal(v):
     return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_boundary_normals_are_second_order():
     """On the validation catenoid's rings (levels 4, 5) eq. (8)–(9) is first order,
     measured max |n − n*| = 0.40·h; the fit is second order, 1.16·h² and 1.27·h²
@@ -322,6 +323,7 @@ def test_boundary_fit_leaves_closed_and_small_fans_alone():
     np.testing.assert_array_equal(fit_boundary_normals(corner, n), n)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_boundary_fit_gradient():
     """d(Σ target · n)/d(vertices) of the fitted normals (the fit depends on the
     stencil's positions and, through the frame, on eq. (8)–(9)) vs a central

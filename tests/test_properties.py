@@ -313,9 +313,10 @@ KEYS = {
 
 def test_perturbed_sphere_few_examples():
     """The fast set's property test: 8 perturbed spheres and endpoint pairs, the
-    default method, all succeed. `max_points=128` on the 162-vertex icosphere: the
-    solver tests/test_batch.py compiles (one compile shared)."""
-    assert_rate(KEYS["sphere"], "exact", 1.0, max_points=128, max_examples=8)
+    default method, all succeed. The 162-vertex icosphere with the default
+    `max_points`: the solver tests/test_exact.py and test_locate.py compile (one
+    compile shared)."""
+    assert_rate(KEYS["sphere"], "exact", 1.0, max_examples=8)
 
 
 @pytest.mark.slow

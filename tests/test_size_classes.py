@@ -91,6 +91,7 @@ def test_padded_layout(make):
 
 
 @pytest.mark.parametrize("make", [holed_plate, lambda: unit_icosphere(3)])
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_points_at_the_sentinel_locate_on_real_faces(make):
     """The padded faces sit at the bounding box's centre (in the plate's hole, at
     the sphere's centre): a point there or near it is located on the nearest
@@ -123,6 +124,7 @@ def test_points_at_the_sentinel_locate_on_real_faces(make):
     )
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_a_second_mesh_of_a_class_does_not_compile(caplog):
     """icosphere(2) and a torus: other shapes, counts and genus, one size class.
     After the first, the second runs single paths and batches with no compile at

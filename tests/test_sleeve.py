@@ -14,6 +14,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxgeo as jg
 from jaxgeo import _sleeve, exact
@@ -52,6 +53,7 @@ def _sleeves(mesh: jg.Mesh, pairs: np.ndarray) -> _sleeve.Sleeve:
     )
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_pull_pins_what_the_funnel_pins():
     mesh = unit_icosphere(2)
     rng = np.random.default_rng(0)

@@ -219,6 +219,7 @@ def test_converges_when_the_path_grazes_vertices():
     assert abs(float(sp.length) / p.analytic - 1) < 1e-6
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_phong_normals_boundary_option():
     """`boundary="keep"` is the weighting itself; `"fit"` (default) changes the
     boundary vertices only; anything else is an error."""

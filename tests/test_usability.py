@@ -196,6 +196,7 @@ def test_float32_note_names_the_cause_only_in_float32():
 # ------------------------------------------------------- endpoints by vertex index
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_integer_endpoints_are_vertex_indices():
     mesh = unit_icosphere(2)
     v = np.asarray(mesh.vertices)
@@ -252,6 +253,7 @@ def test_surface_point_vertex_works_on_traced_indices():
         jg.shortest_path(loose, 162, 0)
 
 
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_batches_of_vertex_indices(batch):
     mesh = batch[0]
     v = np.asarray(mesh.vertices)
