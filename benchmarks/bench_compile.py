@@ -70,10 +70,10 @@ def _phase(name: str, cache: str, method: str) -> dict:
     mesh, out["build_s"], _ = timed(lambda: jg.Mesh(v, f))
     out["faces"] = mesh.n_faces
     out["class"] = list(mesh.size_class)
-    fans = np.asarray(mesh.fan_spokes)
-    comp = np.zeros(mesh.n_vertices, int)
+    comp = np.zeros(mesh.n_vertices, int)  # the catenoid: one component
+    edges, face_edges = np.asarray(mesh.edges), np.asarray(mesh.face_edges)
     _, out["landmarks_s"], _ = timed(
-        lambda: landmark_forests(v, np.asarray(mesh.edges), fans, comp)
+        lambda: landmark_forests(np.asarray(v), np.asarray(f), edges, face_edges, comp)
     )
     _, out["pad_s"], _ = timed(mesh.padded)
     path, out["first_s"], out["first_parts"] = timed(
