@@ -14,12 +14,11 @@ Meshes: the generated ones of `tests/test_exact.py` and pymeshlab's sample meshe
 from __future__ import annotations
 
 import argparse
-import importlib.util
-from pathlib import Path
 
 import jax
 import numpy as np
 import trimesh
+from _samples import pymeshlab_sample, referenced
 
 jax.config.update("jax_enable_x64", True)
 
@@ -29,26 +28,16 @@ from jaxgeo import surfaces  # noqa: E402
 EQUAL = 1e-9  # relative: issue 13's acceptance bound
 
 
-def _clean(v, f) -> jg.Mesh:
-    tm = trimesh.Trimesh(np.asarray(v), np.asarray(f), process=False)
-    tm.remove_unreferenced_vertices()
-    return jg.Mesh(tm.vertices, tm.faces)
-
-
 def meshes() -> list[tuple[str, jg.Mesh]]:
     tor = trimesh.creation.torus(1.0, 0.35, major_sections=24, minor_sections=10)
     out = [
         ("catenoid 24 x 10", jg.Mesh(*surfaces.catenoid(n_around=24, n_height=10))),
         ("icosphere, 2 subdivisions", jg.Mesh(*surfaces.icosphere(2))),
-        ("torus 24 x 10 (trimesh)", _clean(tor.vertices, tor.faces)),
+        ("torus 24 x 10 (trimesh)", referenced(tor)),
     ]
-    spec = importlib.util.find_spec("pymeshlab")
-    if spec and spec.submodule_search_locations:
-        root = Path(spec.submodule_search_locations[0]) / "tests" / "sample_meshes"
-        for name in ("bone.ply", "airplane.obj", "cow.obj", "bunny10k_textured.obj"):
-            if (root / name).is_file():
-                m = jg.load_mesh(root / name)
-                out.append((f"`{name}` (pymeshlab)", _clean(m.vertices, m.faces)))
+    for name in ("bone.ply", "airplane.obj", "cow.obj", "bunny10k_textured.obj"):
+        if (path := pymeshlab_sample(name)) is not None:
+            out.append((f"`{name}` (pymeshlab)", referenced(jg.load_mesh(path))))
     return out
 
 

@@ -15,7 +15,6 @@ wheel when it is installed): compile + first path, median single-path time,
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
 import platform
 import statistics
@@ -23,6 +22,7 @@ import time
 from pathlib import Path
 
 import jax
+from _samples import pymeshlab_sample
 
 jax.config.update("jax_enable_x64", True)
 
@@ -36,12 +36,9 @@ HERE = Path(__file__).resolve().parent
 
 def meshes() -> list[tuple[str, jg.Mesh]]:
     out = [("catenoid 20k", jg.Mesh(*surfaces.catenoid(n_around=100, n_height=100)))]
-    spec = importlib.util.find_spec("pymeshlab")
-    if spec and spec.submodule_search_locations:
-        root = Path(spec.submodule_search_locations[0]) / "tests" / "sample_meshes"
-        for name in ("bone.ply", "cow.obj", "bunny10k_textured.obj"):
-            if (root / name).is_file():
-                out.append((f"{name} (pymeshlab)", jg.load_mesh(root / name)))
+    for name in ("bone.ply", "cow.obj", "bunny10k_textured.obj"):
+        if (path := pymeshlab_sample(name)) is not None:
+            out.append((f"{name} (pymeshlab)", jg.load_mesh(path)))
     return out
 
 

@@ -16,6 +16,7 @@ import argparse
 import time
 
 import jax
+from _samples import pymeshlab_sample, referenced
 
 jax.config.update("jax_enable_x64", True)
 
@@ -56,17 +57,10 @@ def main() -> None:
     if args.mesh == "catenoid":
         mesh = jg.Mesh(*surfaces.catenoid(n_around=100, n_height=100))
     else:
-        import importlib.util
-        import pathlib
-
-        import trimesh
-
-        root = pathlib.Path(importlib.util.find_spec("pymeshlab").origin).parent
-        m = jg.load_mesh(str(root / "tests" / "sample_meshes" / args.mesh))
-        # pygeodesic and potpourri3d refuse unreferenced vertices
-        tm = trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.faces), process=False)
-        tm.remove_unreferenced_vertices()
-        mesh = jg.Mesh(tm.vertices, tm.faces)
+        path = pymeshlab_sample(args.mesh)
+        if path is None:
+            raise SystemExit(f"{args.mesh}: no such sample mesh in pymeshlab")
+        mesh = referenced(jg.load_mesh(path))
     print(f"{args.mesh}: {mesh.n_faces} faces, {mesh.n_vertices} vertices")
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     rng = np.random.default_rng(0)
