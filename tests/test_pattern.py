@@ -86,21 +86,22 @@ def test_allowances_offset_the_cut_line(cone_pattern):
     cut = compensate_pattern(pat, Compensation(1.0, 2.0))
     weld, edge = 0.02, 0.05
     pieces = make_pieces(cut, weld, edge)
+
+    def allowance(run):
+        return weld if run.seam != BOUNDARY else edge
+
     for p in pieces:
         ring = Polygon(p.cut).exterior
         assert Polygon(p.cut).contains(Polygon(p.net).buffer(-1e-9))
         n = len(p.runs)
         for i, r in enumerate(p.runs):
-            d = weld if r.seam != BOUNDARY else edge
+            d = allowance(r)
             line = LineString(r.points)
             gap = ring.distance(line.interpolate(0.5, normalized=True))
             # the cut line is nowhere nearer the net line than the smaller
             # allowance (a crack in the union once ran to a net corner: 42 %
             # of a boundary allowance lost); 1e-6 of an allowance for rounding
-            ends = [
-                weld if q.seam != BOUNDARY else edge
-                for q in (p.runs[i - 1], p.runs[(i + 1) % n])
-            ]
+            ends = [allowance(p.runs[i - 1]), allowance(p.runs[(i + 1) % n])]
             assert ring.distance(line) >= min([d] + ends) * (1 - 1e-6) - 1e-12
             # a run's middle lies its allowance inside the cut line where the
             # corners with its neighbours (within ~ the larger allowance of
