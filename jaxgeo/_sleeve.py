@@ -50,6 +50,17 @@ def cross2d(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
+def _cmul(a, b):
+    """The product of complex numbers stored as (re, im) pairs."""
+    return jnp.stack(
+        [
+            a[..., 0] * b[..., 0] - a[..., 1] * b[..., 1],
+            a[..., 0] * b[..., 1] + a[..., 1] * b[..., 0],
+        ],
+        -1,
+    )
+
+
 def portals(faces: Int[Array, "F 3"], face_edges: Int[Array, "F 3"], corridor, n):
     """Edge, left and right vertex of every portal, the vertex opposite it in the
     next face, and whether consecutive corridor faces share an edge."""
@@ -106,39 +117,53 @@ def unfold(
     ay = safe_norm(jnp.cross(e[0], qa)) / el_[0]
 
     live = jnp.arange(cap) < n - 1
-    keep_right = jnp.concatenate([right[1:] == right[:-1], jnp.array([False])])
+    # the next portal keeps its right end (the new vertex is its left one) or its
+    # left end
+    keep_right = live & jnp.concatenate([right[1:] == right[:-1], jnp.array([False])])
+    keep_left = live & ~keep_right
+    # Portal k's frame: origin at its right vertex, x towards its left one, y
+    # backwards (the next face lies at y < 0). In it the next vertex is
+    # w = (ox, −oy) and the next portal is (w, r) or (l, w): the frame of portal
+    # k + 1 is z_k = t_k + c_k z_{k+1} with a unit complex c_k. Portal k's frame in
+    # the plane is the composition of the maps of portals 0 … k − 1, an associative
+    # scan (log₂ C vector steps instead of C dependent ones).
+    wx, wy = ox, -oy
+    keep_c = jnp.stack([wx, wy], -1)  # (l, r) → (w, r): x turns towards w
+    move_c = jnp.stack([el - wx, -wy], -1)  # → (l, w): origin w, x towards l
+    c = jnp.where(keep_right[:, None], keep_c, move_c)
+    c_norm = safe_norm(c)
+    c = jnp.where(
+        (c_norm > 0)[:, None],
+        c / jnp.where(c_norm > 0, c_norm, 1.0)[:, None],
+        jnp.array([1.0, 0.0], dtype),
+    )
+    t = jnp.where(keep_right[:, None], 0.0, jnp.stack([wx, wy], -1))
+    # dead portals map identically
+    c = jnp.where(live[:, None], c, jnp.array([1.0, 0.0], dtype))
+    t = jnp.where(live[:, None], t, 0.0)
 
-    def step(carry, x):
-        l2, r2, li, ri = carry
-        k, ox_k, oy_k, keep_r, alive = x
-        d = l2 - r2
-        nd = safe_norm(d)
-        dn = d / jnp.where(nd > 0, nd, 1.0)
-        fwd = jnp.stack([dn[1], -dn[0]])
-        w2 = r2 + ox_k * dn + oy_k * fwd
-        wi = k + 2
-        nl2, nli = jnp.where(keep_r, w2, l2), jnp.where(keep_r, wi, li)
-        nr2, nri = jnp.where(keep_r, r2, w2), jnp.where(keep_r, ri, wi)
-        new = (
-            jnp.where(alive, nl2, l2),
-            jnp.where(alive, nr2, r2),
-            jnp.where(alive, nli, li),
-            jnp.where(alive, nri, ri),
-        )
-        return new, (l2, r2, li, ri, w2)
+    def compose(a, b):  # a after b: z ↦ t_a + c_a (t_b + c_b z)
+        (ca, ta), (cb, tb) = a, b
+        return _cmul(ca, cb), ta + _cmul(ca, tb)
 
-    zero = jnp.zeros(2, dtype)
-    l0 = jnp.stack([el[0], jnp.zeros((), dtype)])
-    init = (l0, zero, jnp.int32(0), jnp.int32(1))
-    # the per-portal data as the scan's xs, not indexed inside it: under vmap an
-    # index into a batched closure is a gather per step (4x the cost at 4 lanes)
-    xs = (jnp.arange(cap, dtype=jnp.int32), ox, oy, keep_right, live)
-    _, (l2, r2, li, ri, w2) = jax.lax.scan(step, init, xs)
+    # the frame of portal k is the composition of the maps of portals < k
+    C, T = jax.lax.associative_scan(compose, (c, t))
+    one = jnp.array([[1.0, 0.0]], dtype)
+    C = jnp.concatenate([one, C[:-1]])
+    T = jnp.concatenate([jnp.zeros((1, 2), dtype), T[:-1]])
+    w2 = T + _cmul(C, jnp.stack([wx, wy], -1))
 
-    # instances: 0, 1 = portal 0's ends; k + 2 = vertex opposite portal k
-    inst_vertex = jnp.concatenate([jnp.stack([left[0], right[0]]), opp[:-1]])
-    inst_xy = jnp.concatenate([jnp.stack([l2[0], r2[0]]), w2[:-1]])
+    # instances: 0, 1 = portal 0's ends; k + 2 = vertex opposite portal k. Portal
+    # k's left (right) end is the last vertex that became a left (right) end.
     k = jnp.arange(cap, dtype=jnp.int32)
+    li = jax.lax.cummax(jnp.where(keep_right, k + 2, 0))
+    ri = jax.lax.cummax(jnp.where(keep_left, k + 2, 1))
+    li = jnp.concatenate([jnp.zeros(1, jnp.int32), li[:-1]])
+    ri = jnp.concatenate([jnp.ones(1, jnp.int32), ri[:-1]])
+    inst_vertex = jnp.concatenate([jnp.stack([left[0], right[0]]), opp[:-1]])
+    l0 = jnp.stack([el[0], jnp.zeros((), dtype)])
+    inst_xy = jnp.concatenate([jnp.stack([l0, jnp.zeros(2, dtype)]), w2[:-1]])
+    l2, r2 = inst_xy[li], inst_xy[ri]
     inst_first = jnp.concatenate([jnp.zeros(2, jnp.int32), k[:-1] + 1])
     big = jnp.where(live, k, -1)
     inst_last = (
