@@ -235,105 +235,113 @@ def lane_loop(cond, body, state):
 def funnel(
     sleeves: Sleeve,
 ) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
-    """The shortest path inside each sleeve of a lane batch (the funnel algorithm
-    of Lee & Preparata, in the form of Mononen's "simple stupid funnel"): the
-    instance ids of the points where it bends, `START` first and `END` last, their
-    count, and False when the loop ran out of steps (it cannot for a valid sleeve:
-    each restart moves on)."""
+    """The shortest path inside each sleeve of a lane batch, by the funnel algorithm
+    of Lee & Preparata (1984): the instance ids of the points where it bends,
+    `START` first and `END` last, their count, and False when the loop ran out of
+    steps (it cannot for a valid sleeve).
+
+    The funnel is a deque: the left chain, the apex, the right chain, each chain the
+    taut string from the apex to the portal end on its side (a left chain turns left
+    at every point, a right chain right). Each portal adds one new vertex on one
+    side (the end point comes last, on the right). One loop step either pops the
+    chain end the new point does not turn correctly from, or, when its own chain is
+    empty and the point is on or beyond the other chain's first segment, moves the
+    apex one point along that chain (the old apex becomes a bend of the path), or
+    pushes the point. Every point is pushed once and popped or passed by the apex
+    at most once: at most 3 steps per portal (about 2 on random pairs), one cheap
+    step for all lanes at a time."""
     cap = sleeves.left.shape[-1]
-    # a guard, not a budget: each restart goes back to the portal after the new
-    # apex, so a sleeve of n portals takes up to n·(bends + 1) steps (a corridor
-    # of 182 faces needed more than 4·256 + 8 on the 20k catenoid)
-    limit = cap * (cap + 2) + 8
+    size = 2 * cap + 3  # a chain grows by at most one slot per point, either way
+    mid = cap + 1  # the apex's first slot
+    limit = 3 * cap + 8
+    lanes = sleeves.n.shape[0]
     lxy, rxy = jax.vmap(portal_xy)(sleeves)
 
-    def point(sl, lx, rx, i):
-        at_end = i >= sl.n - 1
-        j = jnp.minimum(i, cap - 1)
-        return (
-            jnp.where(at_end, sl.end_xy, lx[j]),
-            jnp.where(at_end, END, sl.left_inst[j]),
-            jnp.where(at_end, sl.end_xy, rx[j]),
-            jnp.where(at_end, END, sl.right_inst[j]),
-        )
-
     def cond(s):
-        lane = s[0]
-        return (s[1] <= lane.n - 1) & (s[13] < limit)
+        return ~s[9] & (s[10] < limit)
 
     def body(s, active):
-        sl, i, ap, ai, a_i, lp, li, l_i, rp, ri, r_i, out, m, steps, lx, rx = s
-        pl, il, pr, ir = point(sl, lx, rx, i)
-        # A side at the apex bounds nothing (right after a restart, or while the
-        # apex's vertex stays a portal end): any point narrows it, and the other
-        # side cannot cross it. Mononen's version skips the crossing test when the
-        # *moving* side is at the apex, which let a point beyond the other side
-        # invert the funnel (5.8 % long on a flat grid). A point on the other
-        # side's ray counts as crossing it (as in Mononen's): the funnel never has
-        # zero width, where rounding could let the sides swap (seen on the
-        # catenoid: a path 5e-4 shorter than the exact one, outside its corridor).
-        r_apex = ir == ai  # the new right point is the apex's vertex itself
-        r_tight = (ri == ai) | r_apex | (cross2d(rp - ap, pr - ap) >= 0)
-        r_over = r_tight & ~r_apex & (li != ai) & (cross2d(lp - ap, pr - ap) >= 0)
-        r_move = r_tight & ~r_over
-        rp2 = jnp.where(r_move, pr, rp)
-        ri2 = jnp.where(r_move, ir, ri)
-        r_i2 = jnp.where(r_move, i, r_i)
-        # the left side, unless the right restarted the funnel
-        l_apex = il == ai
-        l_tight = ~r_over & ((li == ai) | l_apex | (cross2d(lp - ap, pl - ap) <= 0))
-        l_over = l_tight & ~l_apex & (ri2 != ai) & (cross2d(rp2 - ap, pl - ap) <= 0)
-        l_move = l_tight & ~l_over
-        lp2 = jnp.where(l_move, pl, lp)
-        li2 = jnp.where(l_move, il, li)
-        l_i2 = jnp.where(l_move, i, l_i)
-        restart = r_over | l_over  # the other side becomes the apex
-        np_ = jnp.where(r_over, lp2, rp2)
-        ni = jnp.where(r_over, li2, ri2)
-        n_i = jnp.where(r_over, l_i2, r_i2)
-        bend = active & restart
-        out = out.at[jnp.where(bend, m, out.shape[0])].set(ni, mode="drop")
+        sl, i, deque, xy, lo, apex, hi, out, m, done, steps, lxy, rxy = s
+        at_end = i >= sl.n - 1
+        j = jnp.clip(i, 1, cap - 1)
+        right = at_end | (sl.left_inst[j] == sl.left_inst[j - 1])
+        p = jnp.where(at_end, sl.end_xy, jnp.where(right, rxy[j], lxy[j]))
+        ip = jnp.where(at_end, END, jnp.where(right, sl.right_inst[j], sl.left_inst[j]))
+        sign = jnp.where(right, 1.0, -1.0)  # a right chain turns clockwise
+        step = jnp.where(right, 1, -1)  # its slots grow upwards
+        end = jnp.where(right, hi, lo)
+        own = end != apex  # the point's own chain is not empty
+        keep = sign * cross2d(xy[end] - xy[end - step], p - xy[end]) < 0
+        other = apex - step  # the other chain's first point
+        has_other = jnp.where(right, apex > lo, hi > apex)
+        a_xy = xy[apex]
+        # a point on the other chain's first segment counts as beyond it (as in
+        # Mononen's funnel): the funnel never has zero width, where rounding could
+        # let its sides swap (a path 5e-4 short, outside its corridor, was seen)
+        advance = ~own & has_other & (sign * cross2d(xy[other] - a_xy, p - a_xy) >= 0)
+        push = (own & keep) | (~own & ~advance)
+        pop = own & ~keep
+        new_end = jnp.where(push, end + step, jnp.where(pop, end - step, other))
+        slot = jnp.where(active & push, new_end, size)
+        bend = jnp.where(active & advance, m, out.shape[0])
 
         def upd(new, old):
             return jnp.where(active, new, old)
 
+        # (read the new apex from the updated deque: a read of the old one after
+        # the update made XLA copy the deque every step, 2x slower)
+        deque = deque.at[slot].set(ip, mode="drop")
         return (
             sl,
-            upd(jnp.where(restart, n_i + 1, i + 1), i),
-            upd(jnp.where(restart, np_, ap), ap),
-            upd(jnp.where(restart, ni, ai), ai),
-            upd(jnp.where(restart, n_i, a_i), a_i),
-            upd(jnp.where(restart, np_, lp2), lp),
-            upd(jnp.where(restart, ni, li2), li),
-            upd(jnp.where(restart, n_i, l_i2), l_i),
-            upd(jnp.where(restart, np_, rp2), rp),
-            upd(jnp.where(restart, ni, ri2), ri),
-            upd(jnp.where(restart, n_i, r_i2), r_i),
-            out,
-            m + bend,
+            upd(i + push, i),
+            deque,
+            xy.at[slot].set(p, mode="drop"),
+            upd(jnp.where(right, lo, new_end), lo),
+            upd(jnp.where(advance, other, apex), apex),
+            upd(jnp.where(right, new_end, hi), hi),
+            out.at[bend].set(deque[other], mode="drop"),
+            upd(m + advance, m),
+            upd(push & at_end, done),
             steps + active,
-            lx,
-            rx,
+            lxy,
+            rxy,
         )
 
-    lanes = sleeves.n.shape[0]
-    sp = sleeves.start_xy
-    i32 = jnp.zeros(lanes, jnp.int32)
+    zero = jnp.zeros(lanes, jnp.int32)
+    left0, right0 = sleeves.left_inst[:, 0], sleeves.right_inst[:, 0]
+    deque = jnp.full((lanes, size), END, jnp.int32)
+    deque = deque.at[:, mid - 1].set(left0).at[:, mid].set(START)
+    deque = deque.at[:, mid + 1].set(right0)
+    xy = jnp.zeros((lanes, size, 2), sleeves.inst_xy.dtype)
+    xy = xy.at[:, mid - 1].set(lxy[:, 0]).at[:, mid].set(sleeves.start_xy)
+    xy = xy.at[:, mid + 1].set(rxy[:, 0])
     out = jnp.full((lanes, cap + 2), END, jnp.int32).at[:, 0].set(START)
     init = (
-        sleeves, i32, sp, i32 + START, i32 - 1, sp, i32 + START, i32 - 1,
-        sp, i32 + START, i32 - 1, out, i32 + 1, i32, lxy, rxy,
-    )  # fmt: skip
-    s = lane_loop(cond, body, init)
-    out, m, steps = s[11], s[12], s[13]
+        sleeves,
+        zero + 1,  # i: portal 0's ends are in the deque, portal 1 is next
+        deque,
+        xy,
+        zero + mid - 1,  # lo: the left chain's end
+        zero + mid,  # apex
+        zero + mid + 1,  # hi: the right chain's end
+        out,
+        zero + 1,  # m: bends so far (START)
+        sleeves.n < 2,  # done (one face: the straight segment)
+        zero,  # steps
+        lxy,
+        rxy,
+    )
+    _, _, deque, _, _, apex, hi, out, m, done, _, _, _ = lane_loop(cond, body, init)
 
-    def close(out, m):
-        ends_at_end = out[m - 1] == END
-        out = jnp.where(ends_at_end, out, out.at[m].set(END))
-        return out, jnp.where(ends_at_end, m, m + 1)
+    def close(deque, apex, hi, out, m, n):
+        # the path: the bends so far, then the right chain (it ends at END)
+        k = jnp.arange(size)
+        to = jnp.where((k > apex) & (k <= hi) & (n >= 2), m + k - apex - 1, cap + 2)
+        out = out.at[to].set(deque, mode="drop")
+        return out, jnp.where(n >= 2, m + hi - apex, 2)
 
-    out, m = jax.vmap(close)(out, m)
-    return out, m.astype(jnp.int32), steps < limit
+    out, m = jax.vmap(close)(deque, apex, hi, out, m, sleeves.n)
+    return out, m.astype(jnp.int32), done
 
 
 def _pin_ranges(sl: Sleeve, pins):
@@ -468,19 +476,12 @@ def pull(
     return pins, m, ~changed & fits
 
 
-#: Lane counts up to which `taut` pulls in parallel (`pull`); above, the sequential
-#: funnel. The pull's steps cost in proportion to lanes × capacity, the funnel's in
-#: proportion to lanes only: on random pairs of the 20k-face catenoid
-#: (`benchmarks/exact_speed.py`, CPU time) the pull made single paths (4–8 lanes)
-#: 2.5× faster and batches of 64 pairs (768 lanes) 1.9× slower.
-PULL_MAX_LANES = 16
-
-
 def taut(
     sleeves: Sleeve,
 ) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
-    """The shortest path in each sleeve of a lane batch: `pull` for a few lanes,
-    `funnel` for many (`PULL_MAX_LANES`; both give the same pins)."""
-    if sleeves.n.shape[0] <= PULL_MAX_LANES:
-        return pull(sleeves)
+    """The shortest path in each sleeve of a lane batch: `funnel`. (`pull` gives the
+    same pins in a few dozen vector steps instead of ~2 per portal; on this CPU
+    the funnel is faster at every lane count: 0.57 against 0.82 ms for 4 sleeves
+    of the 20k catenoid's starts, 4.7 against 11.4 ms for 64. A GPU, where each
+    loop step costs a kernel launch, may prefer the pull: not measured.)"""
     return funnel(sleeves)

@@ -7,7 +7,7 @@ are unfolded, and passes through a vertex only where the angle on *both* sides o
 it is at least π. Given a corridor (faces f_0 … f_{n−1} from the start's face to the
 end's, consecutive faces sharing an edge):
 
-1. unfold it into the plane and pull the string: `jaxgeo._sleeve.pull` gives the
+1. unfold it into the plane and pull the string: `jaxgeo._sleeve.funnel` gives the
    shortest path inside the corridor and the vertices it wraps;
 2. at a wrapped vertex v the path turns by τ, so the angle on the corridor's side is
    π + |τ| and the angle on the other side is Θ(v) − π − |τ| (Θ(v): the sum of v's
