@@ -160,6 +160,40 @@ def test_jit_vmap_matches_single_calls():
 
 
 @pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
+def test_worker_pool_refines_every_start_as_one_lane_would(monkeypatch):
+    """Above `exact.POOL_MIN` starts, a pool of workers refines them one after the
+    other (`exact._refine`). Each start's rounds are the same arithmetic as in a
+    lane of its own: the same rounds, flips and status per start, lengths equal to
+    rounding (1e-12: the vectorised width differs)."""
+    from jaxgeo import exact
+
+    from .test_sleeve import _starts
+
+    mesh = unit_icosphere(2)
+    rng = np.random.default_rng(3)
+    corridor, n, s, t = _starts(mesh, jnp.asarray(rng.integers(0, 162, (40, 2))))
+    theta = exact.vertex_angle_sums(mesh.vertices, mesh.faces)
+    status0 = jnp.where(n >= 2, -1, 0).astype(jnp.int32)  # a face: nothing to do
+    tol = 10 * float(jnp.finfo(jnp.float64).eps) ** 0.5
+
+    def refine():  # a new function each time: traced with POOL_MIN as set now
+        return jax.jit(
+            lambda *x: exact._refine(mesh, theta, *x, max_iterations=256, tol=tol)
+        )(corridor, n, status0, s, t)
+
+    lanes = refine()  # 40 starts ≤ POOL_MIN: one lane each
+    monkeypatch.setattr(exact, "POOL_MIN", 4)
+    pooled = refine()  # 40 starts on 10 workers
+    ok = np.asarray(lanes.status) == 0
+    assert ok.mean() >= 0.9 and np.asarray(lanes.iterations).max() >= 3
+    for name in ("status", "iterations", "flips", "n", "m"):
+        assert np.array_equal(getattr(pooled, name), getattr(lanes, name)), name
+    np.testing.assert_allclose(
+        np.asarray(pooled.length)[ok], np.asarray(lanes.length)[ok], rtol=1e-12
+    )
+
+
+@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_gradient_matches_central_differences():
     """d length / d vertices and d length / d endpoint barycentrics, against
     central differences of step 1e-6 (truncation ~1e-12, rounding ~1e-10 /
