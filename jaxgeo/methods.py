@@ -37,7 +37,7 @@ class Exact(eqx.Module):
 
     max_starts: int = 4
     max_iterations: int = 256
-    detours: int = 8
+    detours: int = 16
     detour_rounds: int = 1
     corridor_capacity: int | None = None
 
