@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 
-def safe_norm(x: Float[Array, "... 3"], axis: int = -1) -> Float[Array, ...]:
+def safe_norm(x: Float[Array, "... 3"], axis: int = -1) -> Float[Array, "..."]:
     """Euclidean norm whose gradient is 0 (not NaN) at x = 0."""
     sq = jnp.sum(x * x, axis=axis)
     positive = sq > 0

@@ -239,8 +239,8 @@ def fit_boundary_normals(
 
 
 def edge_normal(
-    n1: Float[Array, 3], n2: Float[Array, 3], u: Float[Array, ""]
-) -> Float[Array, 3]:
+    n1: Float[Array, "3"], n2: Float[Array, "3"], u: Float[Array, ""]
+) -> Float[Array, "3"]:
     """Eq. (10): the normal at parameter `u` of an edge, `n1 + u (n2 − n1)`, linearly
     interpolated and, as in the paper, not renormalised."""
     return n1 + u * (n2 - n1)

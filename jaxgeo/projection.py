@@ -53,7 +53,7 @@ class EdgeCrossings(eqx.Module):
     degenerate: Bool[Array, " N"]
 
 
-def residual(y: Float[Array, 3], args) -> Float[Array, 3]:
+def residual(y: Float[Array, "3"], args) -> Float[Array, "3"]:
     """The residual of System (16) for `y = (u, t, ζ)`; `args = (A, D, x1, Δx, n1,
     Δn)`."""
     a, d, x1, dx, n1, dn = args
@@ -170,8 +170,8 @@ def _solve_one_edge(a, b, x1, x2, n1, n2, max_steps: int):
 
 
 def solve_edges(
-    a: Float[Array, 3],
-    b: Float[Array, 3],
+    a: Float[Array, "3"],
+    b: Float[Array, "3"],
     x1: Float[Array, "N 3"],
     x2: Float[Array, "N 3"],
     n1: Float[Array, "N 3"],
@@ -232,16 +232,16 @@ def initial_guess(a, b, x1, x2, n1, n2, u):
 
 
 def solve_fixed_point(
-    a: Float[Array, 3],
-    b: Float[Array, 3],
-    x1: Float[Array, 3],
-    x2: Float[Array, 3],
-    n1: Float[Array, 3],
-    n2: Float[Array, 3],
+    a: Float[Array, "3"],
+    b: Float[Array, "3"],
+    x1: Float[Array, "3"],
+    x2: Float[Array, "3"],
+    n1: Float[Array, "3"],
+    n2: Float[Array, "3"],
     *,
     rtol: float = 1e-13,
     max_steps: int = 200,
-) -> tuple[Float[Array, 3], Bool[Array, ""]]:
+) -> tuple[Float[Array, "3"], Bool[Array, ""]]:
     """The paper's solver (Steps 3–4) for one edge.
 
     Step 3 solves (16) with the bilinear term `Δn ζ u` dropped; Step 4 moves that
