@@ -4,10 +4,8 @@ Every ```python block (in order, one namespace, one fresh Python process) and
 every command line of every ```bash block (in a temporary directory, one shell
 each, in order) is run as written; only the lines that install the package or run
 the tests are skipped. Cheap tests check that they parse; running them is slow
-(JIT compilation, three `jaxgeo validate` runs and `jaxgeo pattern`): 18 min on
-a shared 2-core machine (533 s of CPU) when the README's repeated `jaxgeo validate`
-and `jaxgeo pattern` lines (126 s, 36 s) still ran twice; about 15 min now
-(`pytest -m slow tests/test_readme.py`).
+(JIT compilation, three `jaxgeo validate` runs and `jaxgeo pattern`): 541 s on 2
+cores (2026-12-04, `pytest -m slow tests/test_readme.py`), in CI's slow set.
 """
 
 from __future__ import annotations
@@ -120,7 +118,6 @@ def test_setup_lines_run(workdir):
     assert any(workdir.iterdir())
 
 
-@pytest.mark.long  # over ~10 min on 2 cores: by hand, `pytest -m long`
 @pytest.mark.slow
 @pytest.mark.parametrize("line", [c for c in COMMANDS if not _is_setup(c)])
 def test_command_line_runs(line, workdir):
@@ -128,7 +125,6 @@ def test_command_line_runs(line, workdir):
     assert r.returncode == 0, f"{line}\nstdout:\n{r.stdout}\nstderr:\n{r.stderr}"
 
 
-@pytest.mark.long  # over ~10 min on 2 cores: by hand, `pytest -m long`
 @pytest.mark.slow
 def test_python_blocks_run(workdir):
     r = subprocess.run(
