@@ -11,8 +11,8 @@ right vertex, k + 2 for the vertex of f_{k+1} opposite portal k. A vertex stays 
 same instance over the consecutive portals it belongs to (`inst_first` …
 `inst_last`), which is how the string pull and the flips tell a vertex the path wraps.
 
-The unfolding is a `lax.scan` over the fixed capacity (masked past n), so that
-`jax.grad` goes through it: it is also the differentiable length of the frozen
+The unfolding is an associative scan over the fixed capacity (masked past n), so
+that `jax.grad` goes through it: it is also the differentiable length of the frozen
 combinatorics (envelope theorem, see `jaxgeo.exact`).
 """
 
@@ -436,9 +436,11 @@ def pull(
     log₂ of the pins; a lane that has not converged in `max_steps` steps returns False
     (the exact engine then reports the lane as failed: another start may still succeed).
     It gives the same pins as the sequential `funnel` of Lee & Preparata
-    (`tests/test_sleeve.py`) in a few dozen vector
-    operations per step instead of one dependent step per portal, which costs ~3.5 µs
-    each on a CPU."""
+    (`tests/test_sleeve.py`) in a few dozen vector steps instead of ~2 dependent
+    steps per portal. The engine uses the funnel: on this CPU it is faster at every
+    lane count (0.57 against 0.82 ms for 4 sleeves of the 20k catenoid's starts, 4.7
+    against 11.4 ms for 64); a GPU, where each loop step costs a kernel launch, may
+    prefer the pull (not measured)."""
     lanes = sleeves.n.shape[0]
     cap = sleeves.left.shape[-1]
     size = cap + 2
@@ -474,14 +476,3 @@ def pull(
     init = (pins, m, jnp.ones(lanes, bool), jnp.ones(lanes, bool), jnp.int32(0))
     pins, m, changed, fits, _ = jax.lax.while_loop(cond, body, init)
     return pins, m, ~changed & fits
-
-
-def taut(
-    sleeves: Sleeve,
-) -> tuple[Int[Array, "B P"], Int[Array, " B"], Bool[Array, " B"]]:
-    """The shortest path in each sleeve of a lane batch: `funnel`. (`pull` gives the
-    same pins in a few dozen vector steps instead of ~2 per portal; on this CPU
-    the funnel is faster at every lane count: 0.57 against 0.82 ms for 4 sleeves
-    of the 20k catenoid's starts, 4.7 against 11.4 ms for 64. A GPU, where each
-    loop step costs a kernel launch, may prefer the pull: not measured.)"""
-    return funnel(sleeves)

@@ -29,8 +29,8 @@ path's length.
 
 **Gradients.** The discrete choices (corridor, wrapped vertices) are made under
 `stop_gradient`; the length is then recomputed from the live vertices and endpoint
-barycentrics by unfolding the final corridor (a `lax.scan`) and summing the planar
-distances between wrapped vertices. By the envelope theorem that is the exact
+barycentrics by unfolding the final corridor (an associative scan) and summing the
+planar distances between wrapped vertices. By the envelope theorem that is the exact
 derivative of the minimal length (the crossing parameters are optimal), and the
 crossing points are differentiable through the unfolding too.
 """
@@ -350,7 +350,7 @@ def _sleeve_of(mesh: Mesh, corridor, n, s: _End, t: _End):
 class _Lane(eqx.Module):
     corridor: Int[Array, " C"]
     n: Int[Array, ""]
-    pinned: Int[Array, " C+2"]  # the taut string's pins (`_sleeve.taut`)
+    pinned: Int[Array, " C+2"]  # the taut string's pins (`_sleeve.funnel`)
     m: Int[Array, ""]
     length: Float[Array, ""]
     iterations: Int[Array, ""]
@@ -371,7 +371,7 @@ def _round(mesh, theta, lane: _Lane, s, t, tol) -> _Lane:
     sl = jax.vmap(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
         lane.corridor, lane.n, s, t
     )
-    pinned, m, fun_ok = _sleeve.taut(sl)
+    pinned, m, fun_ok = _sleeve.funnel(sl)
     length = jax.vmap(_pinned_length)(sl, pinned, m)
     taken, v, a, b, p0, d, count = jax.vmap(
         lambda c, sl_, p, m_: _flips(mesh, theta, c, sl_, p, m_, tol)
@@ -530,7 +530,7 @@ def _assemble(mesh: Mesh, corridor, n, s: _End, t: _End, start, end, cap_points)
     corridor, differentiable in the vertices and the endpoints' barycentrics."""
     sl = _sleeve_of(mesh, corridor, n, s, t)
     one = jax.tree.map(lambda x: x[None], jax.lax.stop_gradient(sl))
-    pinned, m, _ = jax.tree.map(lambda x: x[0], _sleeve.taut(one))
+    pinned, m, _ = jax.tree.map(lambda x: x[0], _sleeve.funnel(one))
     length = _pinned_length(sl, pinned, m)
     cap = corridor.shape[0]
     q = jnp.arange(pinned.shape[0])
