@@ -14,6 +14,7 @@ Meshes: the generated ones of `tests/test_exact.py` and pymeshlab's sample meshe
 from __future__ import annotations
 
 import argparse
+import sys
 
 import jax
 import numpy as np
@@ -84,14 +85,24 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=60)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--starts", type=int, default=None, help="Exact(max_starts=N)")
+    ap.add_argument("--walls", action="store_true", help="Exact(walls=True)")
+    ap.add_argument("--detours", type=int, default=None, help="Exact(detours=N)")
+    ap.add_argument("--detour-rounds", type=int, default=None)
+    ap.add_argument("--only", default=None, help="meshes whose name contains this")
     args = ap.parse_args()
-    method = jg.Exact() if args.starts is None else jg.Exact(max_starts=args.starts)
-    print(
-        f"python benchmarks/accuracy_vs_mmp.py --pairs {args.pairs} --seed {args.seed}"
-    )
+    options = {
+        "max_starts": args.starts,
+        "walls": args.walls or None,
+        "detours": args.detours,
+        "detour_rounds": args.detour_rounds,
+    }
+    method = jg.Exact(**{k: x for k, x in options.items() if x is not None})
+    print("python benchmarks/accuracy_vs_mmp.py " + " ".join(sys.argv[1:]))
     print(method)
     rows = []
     for name, mesh in meshes():
+        if args.only and args.only not in name:
+            continue
         row = {"mesh": name, **compare(mesh, args.pairs, args.seed, method)}
         rows.append(row)
         print(row, flush=True)

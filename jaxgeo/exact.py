@@ -27,6 +27,13 @@ landmarks that give the shortest graph paths, refined as parallel lanes (`jax.vm
 the shortest result kept. Per query there is no graph search: walking a forest costs the
 path's length.
 
+**Detours.** Where many vertices round the path are cone or saddle points (scanned
+meshes), several locally shortest paths lie a row or two of vertices apart, and the
+starts may all flip into the same one. The converged best path is then tried again
+from corridors that pass its nearest cone vertices on their other side, one vertex
+each (`_detours`), and corridors moved across a whole stretch of one of its walls
+(`_wall_flip`), in `detour_rounds` rounds.
+
 **Gradients.** The discrete choices (corridor, wrapped vertices) are made under
 `stop_gradient`; the length is then recomputed from the live vertices and endpoint
 barycentrics by unfolding the final corridor (an associative scan) and summing the
@@ -294,8 +301,45 @@ def _detours(mesh: Mesh, theta, corridor, n, pinned, m, s, t, k: int, tol):
     return jax.vmap(one)(v[pick], a[pick], b[pick], p0, d, count, good)
 
 
+#: The wall detours (`_wall_flip`): both walls, each over these stretches of the
+#: corridor (fractions of its faces): 8 corridors.
+WALL_STRETCHES = ((0.0, 1.0), (0.0, 0.5), (0.5, 1.0), (0.25, 0.75))
+
+
+def _wall_flip(
+    mesh: Mesh, corridor, n, s: _End, t: _End, left: bool, window=(0.0, 1.0)
+):
+    """The corridor moved across one of its walls: every vertex of the left (or
+    right) wall whose fan is closed is passed on its other side, all at once
+    (consecutive wall vertices' runs share one face, see `_apply_flips`). Where a
+    path's homotopy class differs from the shortest one by a row of cone
+    vertices, single-vertex detours each fall back into the old class; this
+    start lies beyond the whole row and the flip loop takes it from there."""
+    sl = _sleeve_of(mesh, corridor, n, s, t)
+    v = sl.inst_vertex
+    a, b = sl.inst_first, sl.inst_last
+    ends = ((s.kind == VERTEX) & (v == s.index)) | ((t.kind == VERTEX) & (v == t.index))
+    ok = (
+        (sl.inst_is_left == left)
+        & (b >= a)
+        & mesh.fan_closed[v]
+        & (b - a + 2 <= mesh.fan_size[v])
+        & ~ends
+        & (a >= window[0] * n)
+        & (b + 1 <= window[1] * n)
+    )
+    p0, d, count = _other_way(mesh, corridor, v, a, b)
+    new, new_n, fits = _apply_flips(mesh, corridor, n, ok, v, a, b, p0, d, count)
+    one = jax.tree.map(lambda x: x[None], (new, new_n, s, t))
+    new, new_n = _clean(mesh, *one)
+    return new[0], new_n[0], fits & sl.valid
+
+
 def _apply_flips(mesh: Mesh, corridor, n, taken, v, a, b, p0, d, count):
-    """Replace corridor faces a … b + 1 of every taken flip by its fan."""
+    """Replace corridor faces a … b + 1 of every taken flip by its fan. The runs
+    of taken flips may share one face (b + 1 of one is a of the next: two
+    consecutive vertices of one wall); the next fan then starts after it, and
+    the backtrack this leaves (…, Y, X, Y, …) is `_clean`'s to remove."""
     cap = corridor.shape[0]
     k = jnp.arange(cap)
     slot = jnp.where(taken, a, cap)
@@ -312,12 +356,13 @@ def _apply_flips(mesh: Mesh, corridor, n, taken, v, a, b, p0, d, count):
         .add(-1, mode="drop")
     )
     inside = jnp.cumsum(diff)[:cap] > 0
-    cnt = jnp.where(k < n, jnp.where(inside, 0, jnp.where(is_start, f_c, 1)), 0)
+    skip = (is_start & inside).astype(jnp.int32)  # the shared face is in already
+    cnt = jnp.where(k < n, jnp.where(is_start, f_c - skip, jnp.where(inside, 0, 1)), 0)
     cum = jnp.cumsum(cnt)
     total = cum[-1]
     j = jnp.arange(cap)
     src = run_of(cnt, cap)
-    off = j - (cum[src] - cnt[src])
+    off = j - (cum[src] - cnt[src]) + skip[src]
     vv = f_v[src]
     pos = (f_p[src] + f_d[src] * off) % jnp.maximum(mesh.fan_size[vv], 1)
     face = jnp.where(is_start[src], mesh.fan_faces[vv, pos], corridor[src])
@@ -599,6 +644,7 @@ def exact_solve(
     corridor_capacity: int | None = None,
     detours: int = 0,
     detour_rounds: int = 1,
+    walls: bool = False,
 ) -> ExactResult:
     """The exact polyhedral geodesics from `start[i]` to `end[i]` for a batch of
     endpoint pairs (leading axis B of `start.face`, `start.bary`, …; see the module
@@ -611,7 +657,9 @@ def exact_solve(
     any of whose lanes outgrew it has `stats.outgrew` set, see
     `jaxgeo.methods.first_attempt`); `detours`: after the starts, refine this
     many corridors that pass the best path's nearest cone vertices on their other
-    side (`_detours`), in `detour_rounds` rounds, each from the best path so far.
+    side (`_detours`), and with `walls` 8 more that pass a whole stretch of one of
+    its walls on the other side (`_wall_flip`), in `detour_rounds` rounds, each
+    from the best path so far.
 
     **Returns:** an `ExactResult` with a leading batch axis.
     """
@@ -646,22 +694,39 @@ def exact_solve(
     # rounds takes the detours of the best path so far, k at a time. All phases
     # run through one `_refine` inside a fori_loop: it is the bulk of the program,
     # and compiled once instead of once per phase (a third of the compile time).
-    chunks = -(-detours // k) if detours else 0
-    phases = 1 + chunks * (detour_rounds if detours else 0)
+    walls_k = [(left, w) for w in WALL_STRETCHES for left in (True, False)]
+    cone_chunks = -(-detours // k) if detours else 0
+    chunks = cone_chunks + (-(-len(walls_k) // k) if walls else 0)
+    phases = 1 + chunks * detour_rounds
+
+    def walls_of(c, m_, a, b):  # padded to whole chunks with unused corridors
+        out = [_wall_flip(smesh, c, m_, a, b, left, w) for left, w in walls_k]
+        used = len(out)
+        out += [(c, m_, jnp.asarray(False))] * (-used % k)
+        corridor, n, fits = (jnp.stack(x) for x in zip(*out))
+        return corridor, n, fits, jnp.arange(len(out)) < used
 
     def detours_of(win: _Lane):
-        corridor, n, fits, valid = jax.vmap(
-            lambda c, m_, p, pm, a, b: _detours(
-                smesh, theta, c, m_, p, pm, a, b, chunks * k, tol
+        parts = []
+        if cone_chunks:
+            parts.append(
+                jax.vmap(
+                    lambda c, m_, p, pm, a, b: _detours(
+                        smesh, theta, c, m_, p, pm, a, b, cone_chunks * k, tol
+                    )
+                )(win.corridor, win.n, win.pinned, win.m, ss, ts)
             )
-        )(win.corridor, win.n, win.pinned, win.m, ss, ts)
+        if walls:
+            parts.append(jax.vmap(walls_of)(win.corridor, win.n, ss, ts))
+        corridor, n, fits, valid = (jnp.concatenate(x, axis=1) for x in zip(*parts))
         status0 = jnp.where(
             valid,
             jnp.where(fits, -1, Status.MAX_STEPS),
             Status.REFINE_FAILED,  # fewer candidate cones than detours
         )
-        chunk = jnp.arange(chunks * k) < detours  # beyond `detours`: unused
-        status0 = jnp.where(chunk, status0, Status.REFINE_FAILED)
+        cone = jnp.arange(chunks * k)
+        used = (cone < detours) | (cone >= cone_chunks * k)  # walls: `valid`
+        status0 = jnp.where(used, status0, Status.REFINE_FAILED)
         return corridor, n, status0.astype(jnp.int32)
 
     def phase(p, carry):

@@ -294,3 +294,73 @@ def test_collinear_wall_vertices_on_the_catenoid():
     ref = pg.PyGeodesicAlgorithmExact(v, f).geodesicDistance(1059, 1304)[0]
     p = jg.shortest_path(mesh, v[1059], v[1304], max_points=POINTS)
     assert abs(float(p.length) - ref) <= EQUAL * ref
+
+
+@pytest.mark.slow  # its own compile (README tests <= 5 min)
+def test_a_wall_flip_moves_the_corridor_across_its_whole_wall():
+    """`exact._wall_flip`: a corridor of faces that share edges, from the start's
+    face to the end's, that passes every flippable vertex of the old left wall on
+    its other side (consecutive wall vertices share a face: `_apply_flips` joins
+    their fans, `_clean` removes the backtrack)."""
+    from jaxgeo import exact
+
+    from .test_sleeve import _starts
+
+    mesh = unit_icosphere(2)
+    rng = np.random.default_rng(5)
+    pairs = jnp.asarray(rng.integers(0, mesh.n_vertices, (24, 2)))
+    corridor, n, s, t = _starts(mesh, pairs)
+
+    def one(c, m, s_, t_):
+        old = exact._sleeve_of(mesh, c, m, s_, t_)
+        new_c, new_n, fits = exact._wall_flip(mesh, c, m, s_, t_, left=True)
+        return old, exact._sleeve_of(mesh, new_c, new_n, s_, t_), new_c, new_n, fits
+
+    old, new, new_c, new_n, fits = jax.jit(jax.vmap(one))(corridor, n, s, t)
+    faces = np.asarray(mesh.faces)
+    moved = 0
+    for i in np.flatnonzero(np.asarray(n) >= 4):
+        assert bool(fits[i]) and bool(new.valid[i])  # faces share edges
+        c = np.asarray(new_c[i])[: int(new_n[i])]
+        assert int(pairs[i, 0]) in faces[c[0]] and int(pairs[i, 1]) in faces[c[-1]]
+        # every left-wall vertex of the old corridor (not an endpoint) is now
+        # passed on the right only
+        k = int(old.n[i])
+        first, last = np.asarray(old.inst_first[i]), np.asarray(old.inst_last[i])
+        live = (np.arange(k + 1) <= k) & (last[: k + 1] >= first[: k + 1])
+        verts = np.asarray(old.inst_vertex[i])[: k + 1]
+        is_left = np.asarray(old.inst_is_left[i])[: k + 1]
+        left = set(verts[live & is_left]) - set(np.asarray(pairs[i]).tolist())
+        kn = int(new.n[i])
+        nlast, nfirst = np.asarray(new.inst_last[i]), np.asarray(new.inst_first[i])
+        nlive = nlast[: kn + 1] >= nfirst[: kn + 1]
+        nverts = np.asarray(new.inst_vertex[i])[: kn + 1]
+        nleft = np.asarray(new.inst_is_left[i])[: kn + 1]
+        still_left = set(nverts[nlive & nleft])
+        assert not (left & still_left), (i, left & still_left)
+        moved += len(left)
+    assert moved >= 20  # the corridors had walls to move
+
+
+@pytest.mark.slow  # cow.obj at its own shapes: ~2 min on 2 cores
+def test_wall_detours_reach_the_shortest_class_on_a_scan():
+    """On the scanned cow (pymeshlab), three random vertex pairs whose shortest
+    paths differ from the default's by a row of cone and saddle vertices
+    (`benchmarks/accuracy_vs_mmp.py --pairs 60 --seed 1`, pairs 18, 26, 28: the
+    old default, `Exact(walls=False, detour_rounds=1)`, ends 4e-4 to 9e-4 above
+    MMP). The default (wall detours, two rounds) ends on MMP's length."""
+    mesh = _referenced(package_mesh("pymeshlab/tests/sample_meshes/cow.obj"))
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    pairs = np.array([[2624, 590], [851, 1571], [2107, 466]])
+    algo = pg.PyGeodesicAlgorithmExact(v, f)
+    ref = np.array([algo.geodesicDistance(int(a), int(b))[0] for a, b in pairs])
+
+    def lengths(method):
+        out = jg.shortest_paths(mesh, pairs[:, 0], pairs[:, 1], method=method)
+        return np.asarray(out.length)
+
+    walls = lengths(jg.Exact())
+    before = lengths(jg.Exact(walls=False, detour_rounds=1))  # session 10's default
+    np.testing.assert_allclose(walls, ref, rtol=EQUAL)
+    assert np.all(before > ref * (1 + 1e-4))  # the pairs need the wall detours
+    assert np.all(walls <= before * (1 + 1e-12))
