@@ -218,11 +218,14 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     )
     p0, d, count = _other_way(mesh, corridor, v, a, b)
 
-    # Fans of consecutive wrapped vertices may share a face (never of others):
-    # in every chain of such conflicts take every other flip, the rest wait.
+    # Fans of consecutive wrapped vertices may share faces (never of others). Two
+    # neighbours on one wall share exactly one face, which `_apply_flips` joins;
+    # in every chain of other conflicts take every other flip, the rest wait.
     prev_flip = jnp.concatenate([jnp.array([False]), flip[:-1]])
     prev_b = jnp.concatenate([jnp.array([-2], b.dtype), b[:-1]])
-    conflict = flip & prev_flip & (a <= prev_b + 1)
+    prev_left = jnp.concatenate([jnp.array([False]), is_left[:-1]])
+    joined = (a == prev_b + 1) & (is_left == prev_left)
+    conflict = flip & prev_flip & (a <= prev_b + 1) & ~joined
     chain_start = jax.lax.cummax(jnp.where(flip & ~conflict, q, -1))
     taken = flip & ((q - chain_start) % 2 == 0)
     return taken, v, a, b, p0, d, count
