@@ -6,13 +6,13 @@ import pytest
 from jaxgeo._errors import JaxgeoError
 from jaxgeo.surfaces import catenoid_parameter
 from jaxgeo.validation import (
-    _catenoid_geodesic_length_shooting,
     catenoid_geodesic_length,
     catenoid_geodesics,
     catenoid_meridian_length,
     catenoid_neck_arc_length,
     great_circle_length,
 )
+from jaxgeo.validation.analytic import _catenoid_geodesic_length_shooting
 
 C = catenoid_parameter(1.0, 1.0)  # ≈ 0.848338, rings of radius 1 at z = ±0.5
 

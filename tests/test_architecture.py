@@ -69,6 +69,10 @@ LAYERS: dict[str, tuple[set[str], set[str]]] = {
     "applications": (
         {
             "validation",
+            "validation.analytic",
+            "validation.suites",
+            "validation.references",
+            "validation.report",
             "io",
             "seams",
             "pattern",
@@ -258,6 +262,7 @@ def test_scanner_sees_known_imports():
     assert ("exact", "_sleeve") in pairs  # `from . import _sleeve`
     assert ("methods", "smooth") in pairs  # an import inside a function
     assert ("cutting.objective", "boundary") in pairs  # `from ..boundary import`
+    assert ("validation.report", "validation.references") in pairs  # `from . import`
     assert ("", "geodesic") in pairs  # the package's re-exports
     private = {(u.importer, u.imported, u.name) for m in MODULES for u in SCANS[m][1]}
     assert ("repair", "mesh", "_check_arrays") in private

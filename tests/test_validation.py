@@ -56,7 +56,7 @@ def test_resolution_checked():
     with pytest.raises(JaxgeoError):
         validation.validate(RES, suites=["torus"])
     with pytest.raises(JaxgeoError):
-        validation._exact_solver("mmp", np.eye(3), np.array([[0, 1, 2]]))
+        validation.references.exact_solver("mmp", np.eye(3), np.array([[0, 1, 2]]))
 
 
 def test_one_suite_row_with_the_default_method():
