@@ -49,8 +49,10 @@ from .reassembly import biot_strain, deviation
 __all__ = ["Settings", "Template", "evaluate", "make_template"]
 
 INSET = 1e-6  # as jaxgeo.seams.INSET
-#: largest cloth capacity (vertices) flattened with a dense QR by solver="auto"
-QR_LIMIT = 256
+#: Gauss-Newton steps of the flattening (all solvers), and its tolerances
+#: (solver "sparse"; optimistix's Cauchy test, max norm, as "qr")
+GN_STEPS = 30
+GN_RTOL, GN_ATOL = 1e-10, 1e-12
 
 
 class Settings(eqx.Module):
@@ -66,14 +68,14 @@ class Settings(eqx.Module):
     method: str = eqx.field(static=True, default="laser")
     max_points: int = eqx.field(static=True, default=160)
     #: linear solver of the flattening's Gauss-Newton steps and its adjoint:
-    #: "qr" (dense: ~1e10 flops per step for a cloth of 1000 faces), "lsmr"
-    #: (matrix-free: one JVP and one VJP per iteration), or "auto": QR up to
-    #: `QR_LIMIT` cloth vertices (the template's capacity), LSMR above. On the
-    #: 6-cloth cone of tests/test_cutting_objective.py both give J within 1e-9
-    #: relative, LSMR 4x faster; but on the four-point sail the Gauss-Newton
-    #: steps with LSMR do not meet their tolerance in 30 steps (the result is
-    #: right to 1e-10, yet reported unconverged, so J = inf).
-    solver: str = eqx.field(static=True, default="auto")
+    #: "sparse" (default: the Gauss-Newton loop on the host, each step a
+    #: sparse LU of the normal equations, `scipy.sparse.linalg.splu`; the
+    #: adjoint one more sparse LU of the Hessian), "qr" (dense QR of the
+    #: Jacobian in `optimistix.least_squares`: ~1e10 flops per step for a cloth
+    #: of 1000 faces) or "lsmr" (matrix-free: one JVP and one VJP per iteration;
+    #: on the four-point sail its Gauss-Newton steps do not meet their
+    #: tolerance in 30 steps, so J = inf).
+    solver: str = eqx.field(static=True, default="sparse")
 
 
 class Template(eqx.Module):
@@ -198,48 +200,228 @@ def _safe_norm(d):
 
 
 def _gauss_newton(name: str, n_vertices: int) -> optx.GaussNewton:
-    if name == "auto":
-        name = "qr" if n_vertices <= QR_LIMIT else "lsmr"
     if name == "qr":
-        return optx.GaussNewton(rtol=1e-10, atol=1e-12, linear_solver=lx.QR())
+        return optx.GaussNewton(rtol=GN_RTOL, atol=GN_ATOL, linear_solver=lx.QR())
     if name == "lsmr":
         # an iterative solve's steps carry ~1e-10 of error: the Gauss-Newton
         # tolerance is set above it (a tighter one is never met)
         ls = lx.LSMR(rtol=1e-12, atol=1e-12, max_steps=4 * n_vertices)
         return optx.GaussNewton(rtol=1e-8, atol=1e-10, linear_solver=ls)
-    raise JaxgeoError(f"unknown flattening solver {name!r}; use auto, qr or lsmr")
+    raise JaxgeoError(f"unknown flattening solver {name!r}; use sparse, qr or lsmr")
 
 
-def _flatten(x3, edges, ew, vmask, uv0, solver="auto"):
-    """Least edge-length strain flattening of one padded cloth (implicit
-    differentiation in `x3` through optimistix's adjoint)."""
-    i, j = edges[:, 0], edges[:, 1]
-    L = _safe_norm(x3[i] - x3[j])
-    sw = jnp.sqrt(ew) / jnp.where(ew > 0, L, 1.0)
+def _gauge(uv0, vmask):
+    """The template's flat centroid `c0`, centred positions `r0` and size."""
     nv = jnp.sum(vmask)
     c0 = jnp.sum(uv0 * vmask[:, None], 0) / nv
     r0 = (uv0 - c0) * vmask[:, None]
-    scale = jnp.sqrt(jnp.sum(r0 * r0))
+    return nv, c0, r0, jnp.sqrt(jnp.sum(r0 * r0))
+
+
+def _residuals(u, L, sw, edges, vmask, uv0):
+    """Weighted edge-length residuals, pins of the padded vertices, and the
+    gauge (centroid and mean rotation against the template's flat cloth, both
+    zero at the optimum)."""
+    i, j = edges[:, 0], edges[:, 1]
+    nv, c0, r0, scale = _gauge(uv0, vmask)
+    d = u[i] - u[j]
+    r_e = sw * (_safe_norm(d) - L)
+    pins = (1.0 - vmask)[:, None] * u
+    c = jnp.sum(u * vmask[:, None], 0) / nv - c0
+    rotn = jnp.sum(r0[:, 0] * u[:, 1] - r0[:, 1] * u[:, 0]) / scale
+    return r_e, pins, c / scale, rotn / scale
+
+
+def _flatten(x3, edges, ew, vmask, uv0, solver="sparse"):
+    """Least edge-length strain flattening of one padded cloth, differentiated
+    implicitly in `x3` (through the optimality condition, not the iterations):
+    by `_implicit` for solver "sparse", by optimistix's adjoint otherwise."""
+    i, j = edges[:, 0], edges[:, 1]
+    L = _safe_norm(x3[i] - x3[j])
+    sw = jnp.sqrt(ew) / jnp.where(ew > 0, L, 1.0)
+    uv0 = jax.lax.stop_gradient(uv0)
+    if solver == "sparse":
+        shapes = (
+            jax.ShapeDtypeStruct(uv0.shape, uv0.dtype),
+            jax.ShapeDtypeStruct((), jnp.bool_),
+        )
+        u, ok = jax.pure_callback(
+            _host_gauss_newton,
+            shapes,
+            *jax.lax.stop_gradient((L, sw)),
+            edges,
+            vmask,
+            uv0,
+            vmap_method="sequential",
+        )
+        return _implicit(u, L, sw, edges, vmask, uv0), ok
 
     def residuals(u, args):
-        L, sw = args
-        d = u[i] - u[j]
-        r_e = sw * (_safe_norm(d) - L)
-        pins = (1.0 - vmask)[:, None] * u
-        c = jnp.sum(u * vmask[:, None], 0) / nv - c0
-        rotn = jnp.sum(r0[:, 0] * u[:, 1] - r0[:, 1] * u[:, 0]) / scale
-        return r_e, pins, c / scale, rotn / scale
+        return _residuals(u, *args, edges, vmask, uv0)
 
-    solver = _gauss_newton(solver, uv0.shape[0])
     sol = optx.least_squares(
         residuals,
-        solver,
-        jax.lax.stop_gradient(uv0),
+        _gauss_newton(solver, uv0.shape[0]),
+        uv0,
         args=(L, sw),
-        max_steps=30,
+        max_steps=GN_STEPS,
         throw=False,
     )
     return sol.value, sol.result == optx.RESULTS.successful
+
+
+# ------------------------------------------------- the sparse flattening (host)
+# The flattening's least squares: r_e = s_e (|u_i - u_j| - L_e) over the edges,
+# r_p = u on padded vertices, and three linear gauge rows B u - b. Its normal
+# matrix J^T J (and its Hessian) couple only the two ends of an edge: sparse,
+# ~8 nonzeros per row, but for B^T B (rank 3, dense). A step solves the bordered
+# system [[A, B^T], [B, -I]] [du; y] = [g; 0] (A the sparse part; y = B du), so
+# B^T B is never formed; `splu` factors it in O(ms) for a 1000-vertex cloth, where
+# a dense QR of the Jacobian takes ~1e10 flops.
+
+
+def _host_system(u, L, sw, edges, vmask, uv0, full):
+    """Residuals `r` (as `_residuals`, flattened), the matrix `A` of the sparse
+    part (Gauss-Newton's J^T J, or with `full` the Hessian of 1/2 |r|^2) and the
+    dense rows `B`, `J^T r`, for one cloth (numpy)."""
+    import scipy.sparse as sp
+
+    u = np.asarray(u, np.float64)
+    n = len(u)
+    live = np.flatnonzero(np.asarray(sw) != 0)
+    i, j = edges[live, 0], edges[live, 1]
+    s, Le = np.asarray(sw)[live], np.asarray(L)[live]
+    d = u[i] - u[j]
+    dn = np.sqrt(np.sum(d * d, 1) + 1e-30)
+    nrm = d / dn[:, None]
+    r_e = s * (dn - Le)
+    # per edge the 2x2 Hessian block of 1/2 r_e^2 in d (Gauss-Newton: s^2 n n^T)
+    blk = (s * s)[:, None, None] * nrm[:, :, None] * nrm[:, None, :]
+    if full:
+        t = (s * s * (dn - Le) / dn)[:, None, None]
+        blk = blk + t * (np.eye(2) - nrm[:, :, None] * nrm[:, None, :])
+    ci, cj = 2 * i[:, None] + np.arange(2), 2 * j[:, None] + np.arange(2)
+    rows, cols, vals = [], [], []
+    for a, sa in ((ci, 1.0), (cj, -1.0)):
+        for b, sb in ((ci, 1.0), (cj, -1.0)):
+            rows.append(np.repeat(a, 2, 1).ravel())
+            cols.append(np.tile(b, (1, 2)).ravel())
+            vals.append((sa * sb * blk).ravel())
+    pad = np.flatnonzero(np.repeat(np.asarray(vmask) == 0, 2))
+    rows.append(pad)
+    cols.append(pad)
+    vals.append(np.ones(len(pad)))
+    A = sp.csc_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(2 * n, 2 * n),
+    )
+    # gauge rows: centroid (x, y) and mean rotation, as _residuals
+    vm = np.asarray(vmask, np.float64)
+    nv = vm.sum()
+    c0 = (uv0 * vm[:, None]).sum(0) / nv
+    r0 = (uv0 - c0) * vm[:, None]
+    scale = np.sqrt(np.sum(r0 * r0))
+    B = np.zeros((3, n, 2))
+    B[0, :, 0] = B[1, :, 1] = vm / (nv * scale)
+    B[2, :, 0], B[2, :, 1] = -r0[:, 1] / scale**2, r0[:, 0] / scale**2
+    B = B.reshape(3, 2 * n)
+    r_g = B @ u.ravel() - np.append(c0 / scale, 0.0)
+    pins = (1.0 - vm)[:, None] * u
+    g = np.zeros((n, 2))  # J^T r
+    w = (s * r_e)[:, None] * nrm
+    np.add.at(g, i, w)
+    np.add.at(g, j, -w)
+    g = g.ravel() + pins.ravel() + B.T @ r_g
+    r = np.concatenate([r_e, pins.ravel(), r_g])
+    return r, A, B, g
+
+
+def _host_solve(A, B, b):
+    """Solve (A + B^T B) x = b by the bordered sparse system."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    K = sp.bmat([[A, sp.csc_matrix(B.T)], [sp.csc_matrix(B), -sp.identity(3)]])
+    return splu(K.tocsc()).solve(np.append(b, np.zeros(3)))[: A.shape[0]]
+
+
+def _host_gauss_newton(L, sw, edges, vmask, uv0):
+    """Gauss-Newton from the template's flat cloth `uv0`, each step a sparse
+    LU; stops as optimistix's GaussNewton (Cauchy test on the step and on the
+    residuals, max norm, `GN_RTOL`, `GN_ATOL`). Returns (u, converged)."""
+    edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
+    u = uv0.copy()
+    r, A, B, g = _host_system(u, L, sw, edges, vmask, uv0, False)
+    for _ in range(GN_STEPS):
+        try:
+            du = -_host_solve(A, B, g).reshape(u.shape)
+        except RuntimeError:  # singular
+            break
+        new = u + du
+        r_new, A, B, g = _host_system(new, L, sw, edges, vmask, uv0, False)
+        if not (np.all(np.isfinite(new)) and np.all(np.isfinite(r_new))):
+            break
+        y_ok = np.all(np.abs(du) < GN_ATOL + GN_RTOL * np.abs(new))
+        f_ok = np.all(np.abs(r_new - r) < GN_ATOL + GN_RTOL * np.abs(r_new))
+        u, r = new, r_new
+        if y_ok and f_ok:
+            return u, np.bool_(True)
+    return u, np.bool_(False)
+
+
+def _host_hessian_solve(u, L, sw, edges, vmask, uv0, b):
+    """The Hessian of 1/2 |r|^2 at `u` applied inversely to `b` (the adjoint)."""
+    edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
+    _, A, B, _ = _host_system(u, L, sw, edges, vmask, uv0, True)
+    return _host_solve(A, B, np.asarray(b, np.float64).ravel()).reshape(b.shape)
+
+
+@jax.custom_jvp
+def _implicit(u, L, sw, edges, vmask, uv0):
+    """`u` (the flattening's optimum for `L`, `sw`), with the tangent of the
+    optimum: du = -H^-1 d(grad_u E)/d(L, sw) [dL, dsw], E = 1/2 |r|^2."""
+    return u
+
+
+def _energy_grad(u, L, sw, edges, vmask, uv0):
+    def energy(u):
+        r = _residuals(u, L, sw, edges, vmask, uv0)
+        return 0.5 * sum(jnp.sum(x * x) for x in r)
+
+    return jax.grad(energy)(u)
+
+
+@_implicit.defjvp
+def _implicit_jvp(primals, tangents):
+    u, L, sw, edges, vmask, uv0 = primals
+    _, dL, dsw, *_ = tangents
+    _, rhs = jax.jvp(
+        lambda L, sw: _energy_grad(u, L, sw, edges, vmask, uv0), (L, sw), (dL, dsw)
+    )
+
+    def matvec(v):
+        return jax.jvp(lambda u: _energy_grad(u, L, sw, edges, vmask, uv0), (u,), (v,))[
+            1
+        ]
+
+    def solve(_, b):
+        return jax.pure_callback(
+            _host_hessian_solve,
+            jax.ShapeDtypeStruct(b.shape, b.dtype),
+            u,
+            L,
+            sw,
+            edges,
+            vmask,
+            uv0,
+            b,
+            vmap_method="sequential",
+        )
+
+    du = jax.lax.custom_linear_solve(
+        matvec, rhs, solve, transpose_solve=solve, symmetric=True
+    )
+    return u, -du
 
 
 def evaluate(
