@@ -5,10 +5,12 @@
 (`jax.vmap` of `jaxgeo.shortest_path`, differentiable points) → cut vertices (a
 fixed weighted sum of mesh vertices and seam points, `CutMesh.sources`: the cut
 topology is held at a **template** built at some layout) → each cloth flattened
-by least edge-length strain (Gauss–Newton, `optimistix.least_squares`,
+by least edge-length strain (Newton steps with a sparse LU on the host,
+`jax.pure_callback`, started from the template's converged flattening;
 differentiated implicitly through the optimality condition, not through its
-iterations) → turned to its warp (the template's angle) and shrunk by the
-uniform compensation → reassembly stress (`reassembly`) →
+iterations: `jax.custom_jvp` with one sparse solve of the Hessian per tangent or
+cotangent, `jax.lax.custom_linear_solve`) → turned to its warp (the template's
+angle) and shrunk by the uniform compensation → reassembly stress (`reassembly`) →
 
     J = rms_dev / |p|  +  λ_waste · waste  +  λ_fit · Σ_c relu(w_c/W − 1)²,
 
@@ -73,13 +75,13 @@ class Settings(eqx.Module):
     method: str = eqx.field(static=True, default="laser")
     max_points: int = eqx.field(static=True, default=160)
     #: linear solver of the flattening's Gauss-Newton steps and its adjoint:
-    #: "sparse" (default: the Gauss-Newton loop on the host, each step a
-    #: sparse LU of the normal equations, `scipy.sparse.linalg.splu`; the
-    #: adjoint one more sparse LU of the Hessian), "qr" (dense QR of the
-    #: Jacobian in `optimistix.least_squares`: ~1e10 flops per step for a cloth
-    #: of 1000 faces) or "lsmr" (matrix-free: one JVP and one VJP per iteration;
-    #: on the four-point sail its Gauss-Newton steps do not meet their
-    #: tolerance in 30 steps, so J = inf).
+    #: "sparse" (default: Newton steps on the host, each a sparse LU of the
+    #: Hessian, `scipy.sparse.linalg.splu`, `_host_newton`; the adjoint one
+    #: more sparse LU), "qr" (optimistix's Gauss-Newton, dense QR of the
+    #: Jacobian: ~1e10 flops per step for a cloth of 1000 faces; linear
+    #: convergence, J = inf at the twin-peak tent's start layout) or "lsmr"
+    #: (matrix-free: one JVP and one VJP per iteration; on the four-point sail
+    #: its Gauss-Newton steps do not meet their tolerance in 30 steps).
     solver: str = eqx.field(static=True, default="sparse")
 
 
