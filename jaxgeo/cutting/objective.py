@@ -55,8 +55,10 @@ INSET = 1e-6  # as jaxgeo.seams.INSET
 #: (solver "sparse"; optimistix's Cauchy test, max norm, as "qr")
 GN_STEPS = 30
 GN_RTOL, GN_ATOL = 1e-10, 1e-12
-#: Newton steps of solver "sparse" (cheap: one sparse LU each)
+#: steps of solver "sparse" (cheap: one or two sparse LUs each)
 HOST_STEPS = 100
+#: its Newton steps start when a Gauss-Newton step is this small (relative)
+NEWTON_NEAR = 1e-5
 #: a step this small (relative) that lowers E nowhere ends the Newton loop as
 #: converged
 STALL_TOL = 1e-8
@@ -208,15 +210,17 @@ def make_template(
 
 
 def _converged(xc, edges, ew, uv):
-    """The flattening of `evaluate` (Newton from `uv`, `jaxgeo.pattern`'s), where
-    it converges, else `uv`. `evaluate` starts there: at nearby layouts Newton
-    then stays on this optimum's branch. From `make_pattern`'s flattening (30
-    function evaluations, not converged on the twin-peak tent's two large
-    cloths) Newton reached other local optima at layouts 1e-6 apart: J jumped
-    between 131, 157 and 323 (central differences off by 30x)."""
+    """The flattening of `evaluate` at the template layout, converged from `uv`
+    (`jaxgeo.pattern`'s) by Newton steps from the start (Gauss-Newton did not
+    converge in 100 steps on the twin-peak's large cloths), else `uv`.
+    `evaluate` starts there: at nearby layouts it then stays on this optimum's
+    branch. From `make_pattern`'s flattening (30 function evaluations, not
+    converged on the twin-peak tent's two large cloths) Newton reached other
+    local optima at layouts 1e-6 apart: J jumped between 131, 157 and 323
+    (central differences off by 30x)."""
     L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
     sw = np.sqrt(ew) / L
-    u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv)
+    u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv, newton=np.inf)
     return u if ok else uv
 
 
@@ -374,35 +378,40 @@ def _energy_np(r):
     return 0.5 * float(r @ r)
 
 
-def _host_newton(L, sw, edges, vmask, uv0):
-    """The flattening from the template's flat cloth `uv0` on the host: a Newton
-    step (the Hessian of 1/2 |r|^2, one sparse LU) where it descends, else a
-    Gauss-Newton step, each with a backtracking (Armijo) line search; at most
+def _host_newton(L, sw, edges, vmask, uv0, newton=NEWTON_NEAR):
+    """The flattening from the template's flat cloth `uv0` on the host:
+    Gauss-Newton steps (one sparse LU each), with a backtracking (Armijo) line
+    search; once a Gauss-Newton step is below `newton` times the cloth's size,
+    Newton steps (the Hessian of 1/2 |r|^2) where they descend. At most
     `HOST_STEPS` steps, converged when a full step is below the tolerance.
 
-    Plain Gauss-Newton (optimistix's, solver "qr") converges only linearly
-    where the residuals are not small: on the twin-peak tent's start layout 4 of
-    its 16 cloths took over 30 steps, and on its two 520-vertex cloths it
-    stalled at steps of 1.6e-3 (E 0.23 -> 2173 at its first step). This loop
-    takes 3-20 steps on the small cloths, ~100 on the large ones (~10 ms each).
+    Gauss-Newton first, as optimistix's (solver "qr"): it finds the same
+    optimum. Newton from the start reached another local optimum on a
+    four-point sail cloth at a line-search trial of the optimiser (J 4.23
+    against 0.386) and so rejected the step that QR took. Newton near the end:
+    Gauss-Newton converges only linearly where the residuals are not small (on
+    the twin-peak tent 4 of 16 cloths took over 30 steps, and its two
+    520-vertex cloths stalled at steps of 1.6e-3 without the line search).
     Returns (u, converged)."""
     edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
     u = uv0.copy()
     for _ in range(HOST_STEPS):
-        r, A, B, g = _host_system(u, L, sw, edges, vmask, uv0, True)
+        r, A, B, g = _host_system(u, L, sw, edges, vmask, uv0, False)
         e0 = _energy_np(r)
         if not np.isfinite(e0):
             break
         try:
             du = -_host_solve(A, B, g)
-        except RuntimeError:  # singular Hessian
-            du = np.zeros_like(g)
-        if not (g @ du < 0):  # not a descent direction: Gauss-Newton's is
-            _, A, B, _ = _host_system(u, L, sw, edges, vmask, uv0, False)
+        except RuntimeError:  # singular
+            break
+        if np.max(np.abs(du)) < newton * (1.0 + np.max(np.abs(u))):
+            _, A, B, _ = _host_system(u, L, sw, edges, vmask, uv0, True)
             try:
-                du = -_host_solve(A, B, g)
-            except RuntimeError:
-                break
+                dn = -_host_solve(A, B, g)
+            except RuntimeError:  # singular Hessian
+                dn = du
+            if g @ dn < 0:  # a descent direction: Newton's step
+                du = dn
         du = du.reshape(u.shape)
         # converged: the full (Newton) step, the distance to the optimum, is
         # below GN_ATOL + GN_RTOL max|u| (the cloth's size), and E changes by
