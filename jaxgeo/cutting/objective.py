@@ -212,7 +212,9 @@ def make_template(
 def _converged(xc, edges, ew, uv):
     """The flattening of `evaluate` at the template layout, converged from `uv`
     (`jaxgeo.pattern`'s) by Newton steps from the start (Gauss-Newton did not
-    converge in 100 steps on the twin-peak's large cloths), else `uv`.
+    converge in 100 steps on the twin-peak's large cloths; on one of them
+    after an optimiser round Newton needed over 100), else by Gauss-Newton
+    first, else `uv`; 500 steps at most (~10 ms each).
     `evaluate` starts there: at nearby layouts it then stays on this optimum's
     branch. From `make_pattern`'s flattening (30 function evaluations, not
     converged on the twin-peak tent's two large cloths) Newton reached other
@@ -220,8 +222,11 @@ def _converged(xc, edges, ew, uv):
     (central differences off by 30x)."""
     L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
     sw = np.sqrt(ew) / L
-    u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv, newton=np.inf)
-    return u if ok else uv
+    for newton in (np.inf, NEWTON_NEAR):  # Newton, else Gauss-Newton first
+        u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv, newton, 5 * HOST_STEPS)
+        if ok:
+            return u
+    return uv
 
 
 def _safe_norm(d):
@@ -378,12 +383,12 @@ def _energy_np(r):
     return 0.5 * float(r @ r)
 
 
-def _host_newton(L, sw, edges, vmask, uv0, newton=NEWTON_NEAR):
+def _host_newton(L, sw, edges, vmask, uv0, newton=NEWTON_NEAR, steps=HOST_STEPS):
     """The flattening from the template's flat cloth `uv0` on the host:
     Gauss-Newton steps (one sparse LU each), with a backtracking (Armijo) line
     search; once a Gauss-Newton step is below `newton` times the cloth's size,
     Newton steps (the Hessian of 1/2 |r|^2) where they descend. At most
-    `HOST_STEPS` steps, converged when a full step is below the tolerance.
+    `steps` steps, converged when a full step is below the tolerance.
 
     Gauss-Newton first, as optimistix's (solver "qr"): it finds the same
     optimum. Newton from the start reached another local optimum on a
@@ -395,7 +400,7 @@ def _host_newton(L, sw, edges, vmask, uv0, newton=NEWTON_NEAR):
     Returns (u, converged)."""
     edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
     u = uv0.copy()
-    for _ in range(HOST_STEPS):
+    for _ in range(steps):
         r, A, B, g = _host_system(u, L, sw, edges, vmask, uv0, False)
         e0 = _energy_np(r)
         if not np.isfinite(e0):
