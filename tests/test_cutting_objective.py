@@ -131,7 +131,7 @@ def _small_cloth():
 def test_sparse_flattening_matches_qr_and_its_derivative_the_differences():
     """The host Newton flattening (solver "sparse") reaches optimistix's
     Gauss-Newton optimum (solver "qr"), and its implicit JVP and VJP agree
-    with central differences and with each other (fast: ~3 s)."""
+    with central differences and with each other (~4 s)."""
     from jaxgeo.cutting.objective import _flatten
 
     x3, edges, ew, vmask, uv0 = _small_cloth()
