@@ -67,7 +67,9 @@ def measure(mesh, layout, compensation: Compensation, method: str) -> dict:
     return {"max": total["max"], "rms": total["rms"], "widest": float(pat.widths.max())}
 
 
-def run(steps: int, rounds: int, log, only: str | None = None) -> list[dict]:
+def run(
+    steps: int, rounds: int, log, only: str | None = None, max_move: float = 0.02
+) -> list[dict]:
     eps = np.asarray(PRESTRESS.strain(MATERIAL))[:2]
     comp = Compensation(*(100 * eps))
     rows = []
@@ -88,7 +90,13 @@ def run(steps: int, rounds: int, log, only: str | None = None) -> list[dict]:
         log(f"  width-only {width} ({time.time() - t:.0f} s)")
         t = time.time()
         res = optimise_seams(
-            c.mesh, c.layout, settings, steps=steps, rounds=rounds, log=log
+            c.mesh,
+            c.layout,
+            settings,
+            steps=steps,
+            rounds=rounds,
+            max_move=max_move,
+            log=log,
         )
         stress = measure(c.mesh, res.layout, comp, method)
         log(f"  stress {stress} ({time.time() - t:.0f} s)")
@@ -122,13 +130,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rounds", type=int, default=2, help="rounds of each optimiser")
     p.add_argument("--json", default=None, help="write the rows here too")
     p.add_argument("--only", default=None, help="the cases whose name has this")
+    p.add_argument(
+        "--max-move",
+        type=float,
+        default=0.02,
+        help="the stress optimiser's largest seam-end move per round (of the loop)",
+    )
     a = p.parse_args(argv)
     t0 = time.time()
 
     def log(msg: str) -> None:
         print(f"[{time.time() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
 
-    rows = run(a.steps, a.rounds, log, a.only)
+    rows = run(a.steps, a.rounds, log, a.only, a.max_move)
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=2)

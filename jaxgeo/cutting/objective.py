@@ -5,10 +5,12 @@
 (`jax.vmap` of `jaxgeo.shortest_path`, differentiable points) → cut vertices (a
 fixed weighted sum of mesh vertices and seam points, `CutMesh.sources`: the cut
 topology is held at a **template** built at some layout) → each cloth flattened
-by least edge-length strain (Gauss–Newton, `optimistix.least_squares`,
+by least edge-length strain (Newton steps with a sparse LU on the host,
+`jax.pure_callback`, started from the template's converged flattening;
 differentiated implicitly through the optimality condition, not through its
-iterations) → turned to its warp (the template's angle) and shrunk by the
-uniform compensation → reassembly stress (`reassembly`) →
+iterations: `jax.custom_jvp` with one sparse solve of the Hessian per tangent or
+cotangent, `jax.lax.custom_linear_solve`) → turned to its warp (the template's
+angle) and shrunk by the uniform compensation → reassembly stress (`reassembly`) →
 
     J = rms_dev / |p|  +  λ_waste · waste  +  λ_fit · Σ_c relu(w_c/W − 1)²,
 
@@ -49,8 +51,17 @@ from .reassembly import biot_strain, deviation
 __all__ = ["Settings", "Template", "evaluate", "make_template"]
 
 INSET = 1e-6  # as jaxgeo.seams.INSET
-#: largest cloth capacity (vertices) flattened with a dense QR by solver="auto"
-QR_LIMIT = 256
+#: Gauss-Newton steps of the flattening (all solvers), and its tolerances
+#: (solver "sparse"; optimistix's Cauchy test, max norm, as "qr")
+GN_STEPS = 30
+GN_RTOL, GN_ATOL = 1e-10, 1e-12
+#: steps of solver "sparse" (cheap: one or two sparse LUs each)
+HOST_STEPS = 100
+#: its Newton steps start when a Gauss-Newton step is this small (relative)
+NEWTON_NEAR = 1e-5
+#: a step this small (relative) that lowers E nowhere ends the Newton loop as
+#: converged
+STALL_TOL = 1e-8
 
 
 class Settings(eqx.Module):
@@ -66,14 +77,14 @@ class Settings(eqx.Module):
     method: str = eqx.field(static=True, default="laser")
     max_points: int = eqx.field(static=True, default=160)
     #: linear solver of the flattening's Gauss-Newton steps and its adjoint:
-    #: "qr" (dense: ~1e10 flops per step for a cloth of 1000 faces), "lsmr"
-    #: (matrix-free: one JVP and one VJP per iteration), or "auto": QR up to
-    #: `QR_LIMIT` cloth vertices (the template's capacity), LSMR above. On the
-    #: 6-cloth cone of tests/test_cutting_objective.py both give J within 1e-9
-    #: relative, LSMR 4x faster; but on the four-point sail the Gauss-Newton
-    #: steps with LSMR do not meet their tolerance in 30 steps (the result is
-    #: right to 1e-10, yet reported unconverged, so J = inf).
-    solver: str = eqx.field(static=True, default="auto")
+    #: "sparse" (default: Newton steps on the host, each a sparse LU of the
+    #: Hessian, `scipy.sparse.linalg.splu`, `_host_newton`; the adjoint one
+    #: more sparse LU), "qr" (optimistix's Gauss-Newton, dense QR of the
+    #: Jacobian: ~1e10 flops per step for a cloth of 1000 faces; linear
+    #: convergence, J = inf at the twin-peak tent's start layout) or "lsmr"
+    #: (matrix-free: one JVP and one VJP per iteration; on the four-point sail
+    #: its Gauss-Newton steps do not meet their tolerance in 30 steps).
+    solver: str = eqx.field(static=True, default="sparse")
 
 
 class Template(eqx.Module):
@@ -158,6 +169,11 @@ def make_template(
     fmask = np.zeros((C, cap.cloth_faces))
     uv0 = np.zeros((C, cap.cloth_vertices, 2))
     rot = np.zeros((C, 2, 2))
+    # the cut vertices as `evaluate` makes them at this layout
+    src = np.concatenate(
+        [np.asarray(mesh.vertices), np.asarray(paths.points).reshape(-1, 3)]
+    )
+    x3 = np.sum(src[idx] * w[..., None], axis=1)
     for k, cc in enumerate(cloths):
         c = cc.cloth
         n, f = len(c.vertex_ids), c.faces
@@ -175,7 +191,7 @@ def make_template(
         ]
         faces[k, : len(f)] = f
         fmask[k, : len(f)] = 1.0
-        uv0[k, :n] = c.uv
+        uv0[k, :n] = _converged(x3[c.vertex_ids], e, ew[k, : len(e)], c.uv)
         a = cc.warp_angle
         rot[k] = [[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]]
     t = Template(
@@ -193,53 +209,297 @@ def make_template(
     return t, cap
 
 
+def _converged(xc, edges, ew, uv):
+    """The flattening of `evaluate` at the template layout, converged from `uv`
+    (`jaxgeo.pattern`'s) by Newton steps from the start (Gauss-Newton did not
+    converge in 100 steps on the twin-peak's large cloths; on one of them
+    after an optimiser round Newton needed over 100), else by Gauss-Newton
+    first, else `uv`; 500 steps at most (~10 ms each).
+    `evaluate` starts there: at nearby layouts it then stays on this optimum's
+    branch. From `make_pattern`'s flattening (30 function evaluations, not
+    converged on the twin-peak tent's two large cloths) Newton reached other
+    local optima at layouts 1e-6 apart: J jumped between 131, 157 and 323
+    (central differences off by 30x)."""
+    L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
+    sw = np.sqrt(ew) / L
+    for newton in (np.inf, NEWTON_NEAR):  # Newton, else Gauss-Newton first
+        u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv, newton, 5 * HOST_STEPS)
+        if ok:
+            return u
+    return uv
+
+
 def _safe_norm(d):
     return jnp.sqrt(jnp.sum(d * d, axis=-1) + 1e-30)
 
 
 def _gauss_newton(name: str, n_vertices: int) -> optx.GaussNewton:
-    if name == "auto":
-        name = "qr" if n_vertices <= QR_LIMIT else "lsmr"
     if name == "qr":
-        return optx.GaussNewton(rtol=1e-10, atol=1e-12, linear_solver=lx.QR())
+        return optx.GaussNewton(rtol=GN_RTOL, atol=GN_ATOL, linear_solver=lx.QR())
     if name == "lsmr":
         # an iterative solve's steps carry ~1e-10 of error: the Gauss-Newton
         # tolerance is set above it (a tighter one is never met)
         ls = lx.LSMR(rtol=1e-12, atol=1e-12, max_steps=4 * n_vertices)
         return optx.GaussNewton(rtol=1e-8, atol=1e-10, linear_solver=ls)
-    raise JaxgeoError(f"unknown flattening solver {name!r}; use auto, qr or lsmr")
+    raise JaxgeoError(f"unknown flattening solver {name!r}; use sparse, qr or lsmr")
 
 
-def _flatten(x3, edges, ew, vmask, uv0, solver="auto"):
-    """Least edge-length strain flattening of one padded cloth (implicit
-    differentiation in `x3` through optimistix's adjoint)."""
-    i, j = edges[:, 0], edges[:, 1]
-    L = _safe_norm(x3[i] - x3[j])
-    sw = jnp.sqrt(ew) / jnp.where(ew > 0, L, 1.0)
+def _gauge(uv0, vmask):
+    """The template's flat centroid `c0`, centred positions `r0` and size."""
     nv = jnp.sum(vmask)
     c0 = jnp.sum(uv0 * vmask[:, None], 0) / nv
     r0 = (uv0 - c0) * vmask[:, None]
-    scale = jnp.sqrt(jnp.sum(r0 * r0))
+    return nv, c0, r0, jnp.sqrt(jnp.sum(r0 * r0))
+
+
+def _residuals(u, L, sw, edges, vmask, uv0):
+    """Weighted edge-length residuals, pins of the padded vertices, and the
+    gauge (centroid and mean rotation against the template's flat cloth, both
+    zero at the optimum)."""
+    i, j = edges[:, 0], edges[:, 1]
+    nv, c0, r0, scale = _gauge(uv0, vmask)
+    d = u[i] - u[j]
+    r_e = sw * (_safe_norm(d) - L)
+    pins = (1.0 - vmask)[:, None] * u
+    c = jnp.sum(u * vmask[:, None], 0) / nv - c0
+    rotn = jnp.sum(r0[:, 0] * u[:, 1] - r0[:, 1] * u[:, 0]) / scale
+    return r_e, pins, c / scale, rotn / scale
+
+
+def _flatten(x3, edges, ew, vmask, uv0, solver="sparse"):
+    """Least edge-length strain flattening of one padded cloth, differentiated
+    implicitly in `x3` (through the optimality condition, not the iterations):
+    by `_implicit` for solver "sparse", by optimistix's adjoint otherwise."""
+    i, j = edges[:, 0], edges[:, 1]
+    L = _safe_norm(x3[i] - x3[j])
+    sw = jnp.sqrt(ew) / jnp.where(ew > 0, L, 1.0)
+    uv0 = jax.lax.stop_gradient(uv0)
+    if solver == "sparse":
+        shapes = (
+            jax.ShapeDtypeStruct(uv0.shape, uv0.dtype),
+            jax.ShapeDtypeStruct((), jnp.bool_),
+        )
+        u, ok = jax.pure_callback(
+            _host_newton,
+            shapes,
+            *jax.lax.stop_gradient((L, sw)),
+            edges,
+            vmask,
+            uv0,
+            vmap_method="sequential",
+        )
+        return _implicit(u, L, sw, edges, vmask, uv0), ok
 
     def residuals(u, args):
-        L, sw = args
-        d = u[i] - u[j]
-        r_e = sw * (_safe_norm(d) - L)
-        pins = (1.0 - vmask)[:, None] * u
-        c = jnp.sum(u * vmask[:, None], 0) / nv - c0
-        rotn = jnp.sum(r0[:, 0] * u[:, 1] - r0[:, 1] * u[:, 0]) / scale
-        return r_e, pins, c / scale, rotn / scale
+        return _residuals(u, *args, edges, vmask, uv0)
 
-    solver = _gauss_newton(solver, uv0.shape[0])
     sol = optx.least_squares(
         residuals,
-        solver,
-        jax.lax.stop_gradient(uv0),
+        _gauss_newton(solver, uv0.shape[0]),
+        uv0,
         args=(L, sw),
-        max_steps=30,
+        max_steps=GN_STEPS,
         throw=False,
     )
     return sol.value, sol.result == optx.RESULTS.successful
+
+
+# ------------------------------------------------- the sparse flattening (host)
+# The flattening's least squares: r_e = s_e (|u_i - u_j| - L_e) over the edges,
+# r_p = u on padded vertices, and three linear gauge rows B u - b. Its normal
+# matrix J^T J (and its Hessian) couple only the two ends of an edge: sparse,
+# ~8 nonzeros per row, but for B^T B (rank 3, dense). A step solves the bordered
+# system [[A, B^T], [B, -I]] [du; y] = [g; 0] (A the sparse part; y = B du), so
+# B^T B is never formed; `splu` factors it in O(ms) for a 1000-vertex cloth, where
+# a dense QR of the Jacobian takes ~1e10 flops.
+
+
+def _host_system(u, L, sw, edges, vmask, uv0, full):
+    """Residuals `r` (as `_residuals`, flattened), the matrix `A` of the sparse
+    part (Gauss-Newton's J^T J, or with `full` the Hessian of 1/2 |r|^2) and the
+    dense rows `B`, `J^T r`, for one cloth (numpy)."""
+    import scipy.sparse as sp
+
+    u = np.asarray(u, np.float64)
+    n = len(u)
+    live = np.flatnonzero(np.asarray(sw) != 0)
+    i, j = edges[live, 0], edges[live, 1]
+    s, Le = np.asarray(sw)[live], np.asarray(L)[live]
+    d = u[i] - u[j]
+    dn = np.sqrt(np.sum(d * d, 1) + 1e-30)
+    nrm = d / dn[:, None]
+    r_e = s * (dn - Le)
+    # per edge the 2x2 Hessian block of 1/2 r_e^2 in d (Gauss-Newton: s^2 n n^T)
+    blk = (s * s)[:, None, None] * nrm[:, :, None] * nrm[:, None, :]
+    if full:
+        t = (s * s * (dn - Le) / dn)[:, None, None]
+        blk = blk + t * (np.eye(2) - nrm[:, :, None] * nrm[:, None, :])
+    ci, cj = 2 * i[:, None] + np.arange(2), 2 * j[:, None] + np.arange(2)
+    rows, cols, vals = [], [], []
+    for a, sa in ((ci, 1.0), (cj, -1.0)):
+        for b, sb in ((ci, 1.0), (cj, -1.0)):
+            rows.append(np.repeat(a, 2, 1).ravel())
+            cols.append(np.tile(b, (1, 2)).ravel())
+            vals.append((sa * sb * blk).ravel())
+    pad = np.flatnonzero(np.repeat(np.asarray(vmask) == 0, 2))
+    rows.append(pad)
+    cols.append(pad)
+    vals.append(np.ones(len(pad)))
+    A = sp.csc_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(2 * n, 2 * n),
+    )
+    # gauge rows: centroid (x, y) and mean rotation, as _residuals
+    vm = np.asarray(vmask, np.float64)
+    nv = vm.sum()
+    c0 = (uv0 * vm[:, None]).sum(0) / nv
+    r0 = (uv0 - c0) * vm[:, None]
+    scale = np.sqrt(np.sum(r0 * r0))
+    B = np.zeros((3, n, 2))
+    B[0, :, 0] = B[1, :, 1] = vm / (nv * scale)
+    B[2, :, 0], B[2, :, 1] = -r0[:, 1] / scale**2, r0[:, 0] / scale**2
+    B = B.reshape(3, 2 * n)
+    r_g = B @ u.ravel() - np.append(c0 / scale, 0.0)
+    pins = (1.0 - vm)[:, None] * u
+    g = np.zeros((n, 2))  # J^T r
+    w = (s * r_e)[:, None] * nrm
+    np.add.at(g, i, w)
+    np.add.at(g, j, -w)
+    g = g.ravel() + pins.ravel() + B.T @ r_g
+    r = np.concatenate([r_e, pins.ravel(), r_g])
+    return r, A, B, g
+
+
+def _host_solve(A, B, b):
+    """Solve (A + B^T B) x = b by the bordered sparse system."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    K = sp.bmat([[A, sp.csc_matrix(B.T)], [sp.csc_matrix(B), -sp.identity(3)]])
+    return splu(K.tocsc()).solve(np.append(b, np.zeros(3)))[: A.shape[0]]
+
+
+def _energy_np(r):
+    return 0.5 * float(r @ r)
+
+
+def _host_newton(L, sw, edges, vmask, uv0, newton=NEWTON_NEAR, steps=HOST_STEPS):
+    """The flattening from the template's flat cloth `uv0` on the host:
+    Gauss-Newton steps (one sparse LU each), with a backtracking (Armijo) line
+    search; once a Gauss-Newton step is below `newton` times the cloth's size,
+    Newton steps (the Hessian of 1/2 |r|^2) where they descend. At most
+    `steps` steps, converged when a full step is below the tolerance.
+
+    Gauss-Newton first, as optimistix's (solver "qr"): it finds the same
+    optimum. Newton from the start reached another local optimum on a
+    four-point sail cloth at a line-search trial of the optimiser (J 4.23
+    against 0.386) and so rejected the step that QR took. Newton near the end:
+    Gauss-Newton converges only linearly where the residuals are not small (on
+    the twin-peak tent 4 of 16 cloths took over 30 steps, and its two
+    520-vertex cloths stalled at steps of 1.6e-3 without the line search).
+    Returns (u, converged)."""
+    edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
+    u = uv0.copy()
+    for _ in range(steps):
+        r, A, B, g = _host_system(u, L, sw, edges, vmask, uv0, False)
+        e0 = _energy_np(r)
+        if not np.isfinite(e0):
+            break
+        try:
+            du = -_host_solve(A, B, g)
+        except RuntimeError:  # singular
+            break
+        if np.max(np.abs(du)) < newton * (1.0 + np.max(np.abs(u))):
+            _, A, B, _ = _host_system(u, L, sw, edges, vmask, uv0, True)
+            try:
+                dn = -_host_solve(A, B, g)
+            except RuntimeError:  # singular Hessian
+                dn = du
+            if g @ dn < 0:  # a descent direction: Newton's step
+                du = dn
+        du = du.reshape(u.shape)
+        # converged: the full (Newton) step, the distance to the optimum, is
+        # below GN_ATOL + GN_RTOL max|u| (the cloth's size), and E changes by
+        # at most GN_RTOL E. (Not optimistix's test, per coordinate and on
+        # every residual: the Newton step's roundoff, ~5e-12 on a twin-peak
+        # cloth, exceeds 1e-12 + 1e-10 |u_i| near the origin, and with edge
+        # weights 1/L ~ 100 it moves residuals of ~1e-3 by more than
+        # 1e-12 + 1e-10 |r|: 3 of its 16 cloths never passed it.)
+        new = u + du
+        r_new = _host_system(new, L, sw, edges, vmask, uv0, False)[0]
+        size = np.max(np.abs(new))
+        if np.max(np.abs(du)) < GN_ATOL + GN_RTOL * size and (
+            abs(_energy_np(r_new) - e0) <= GN_RTOL * e0
+        ):
+            return new, np.bool_(True)
+        slope, t = float(g @ du.ravel()), 1.0
+        while _energy_np(r_new) > e0 + 1e-4 * t * slope:
+            t *= 0.5
+            if t < 1e-8:
+                # no lower E along the step: at the optimum to roundoff if the
+                # step is (an ill-conditioned Hessian's noise, ~1e-11 on one
+                # twin-peak cloth), else stuck
+                small = np.max(np.abs(du)) <= STALL_TOL * (1.0 + np.max(np.abs(u)))
+                return u, np.bool_(small)
+            new = u + t * du
+            r_new = _host_system(new, L, sw, edges, vmask, uv0, False)[0]
+        u = new
+    return u, np.bool_(False)
+
+
+def _host_hessian_solve(u, L, sw, edges, vmask, uv0, b):
+    """The Hessian of 1/2 |r|^2 at `u` applied inversely to `b` (the adjoint)."""
+    edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
+    _, A, B, _ = _host_system(u, L, sw, edges, vmask, uv0, True)
+    return _host_solve(A, B, np.asarray(b, np.float64).ravel()).reshape(b.shape)
+
+
+@jax.custom_jvp
+def _implicit(u, L, sw, edges, vmask, uv0):
+    """`u` (the flattening's optimum for `L`, `sw`), with the tangent of the
+    optimum: du = -H^-1 d(grad_u E)/d(L, sw) [dL, dsw], E = 1/2 |r|^2."""
+    return u
+
+
+def _energy_grad(u, L, sw, edges, vmask, uv0):
+    def energy(u):
+        r = _residuals(u, L, sw, edges, vmask, uv0)
+        return 0.5 * sum(jnp.sum(x * x) for x in r)
+
+    return jax.grad(energy)(u)
+
+
+@_implicit.defjvp
+def _implicit_jvp(primals, tangents):
+    u, L, sw, edges, vmask, uv0 = primals
+    _, dL, dsw, *_ = tangents
+    _, rhs = jax.jvp(
+        lambda L, sw: _energy_grad(u, L, sw, edges, vmask, uv0), (L, sw), (dL, dsw)
+    )
+
+    def matvec(v):
+        return jax.jvp(lambda u: _energy_grad(u, L, sw, edges, vmask, uv0), (u,), (v,))[
+            1
+        ]
+
+    def solve(_, b):
+        return jax.pure_callback(
+            _host_hessian_solve,
+            jax.ShapeDtypeStruct(b.shape, b.dtype),
+            u,
+            L,
+            sw,
+            edges,
+            vmask,
+            uv0,
+            b,
+            vmap_method="sequential",
+        )
+
+    du = jax.lax.custom_linear_solve(
+        matvec, rhs, solve, transpose_solve=solve, symmetric=True
+    )
+    return u, -du
 
 
 def evaluate(
