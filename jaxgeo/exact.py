@@ -304,21 +304,32 @@ def _detours(mesh: Mesh, theta, corridor, n, pinned, m, s, t, k: int, tol):
     return jax.vmap(one)(v[pick], a[pick], b[pick], p0, d, count, good)
 
 
-#: The wall detours (`_wall_flip`): both walls, each over these stretches of the
+#: The wall detours (`_wall_flips`): both walls, each over these stretches of the
 #: corridor (fractions of its faces): 8 corridors.
 WALL_STRETCHES = ((0.0, 1.0), (0.0, 0.5), (0.5, 1.0), (0.25, 0.75))
 
 
-def _wall_flip(
-    mesh: Mesh, corridor, n, s: _End, t: _End, left: bool, window=(0.0, 1.0)
-):
-    """The corridor moved across one of its walls: every vertex of the left (or
-    right) wall whose fan is closed is passed on its other side, all at once
-    (consecutive wall vertices' runs share one face, see `_apply_flips`). Where a
-    path's homotopy class differs from the shortest one by a row of cone
+def _wall_flips(mesh: Mesh, corridor, n, s: _End, t: _End):
+    """`_wall_flip` for both walls over every stretch of `WALL_STRETCHES`:
+    corridors (8, C), their lengths, whether each fits."""
+    sl = _sleeve_of(mesh, corridor, n, s, t)
+    left = jnp.array([left for _ in WALL_STRETCHES for left in (True, False)])
+    lo, hi = (
+        jnp.array([w[i] for w in WALL_STRETCHES for _ in (True, False)]) for i in (0, 1)
+    )
+    return jax.vmap(lambda *x: _wall_flip(mesh, corridor, n, sl, s, t, *x))(
+        left, lo, hi
+    )
+
+
+def _wall_flip(mesh: Mesh, corridor, n, sl, s: _End, t: _End, left, lo, hi):
+    """The corridor (unfolded: `sl`) moved across one of its walls: every vertex
+    of the left (or right) wall, between the fractions `lo` and `hi` of its faces,
+    whose fan is closed is passed on its other side, all at once (consecutive
+    wall vertices' runs share one face, see `_apply_flips`). Where a path's
+    homotopy class differs from the shortest one by a row of cone or saddle
     vertices, single-vertex detours each fall back into the old class; this
     start lies beyond the whole row and the flip loop takes it from there."""
-    sl = _sleeve_of(mesh, corridor, n, s, t)
     v = sl.inst_vertex
     a, b = sl.inst_first, sl.inst_last
     ends = ((s.kind == VERTEX) & (v == s.index)) | ((t.kind == VERTEX) & (v == t.index))
@@ -328,8 +339,8 @@ def _wall_flip(
         & mesh.fan_closed[v]
         & (b - a + 2 <= mesh.fan_size[v])
         & ~ends
-        & (a >= window[0] * n)
-        & (b + 1 <= window[1] * n)
+        & (a >= lo * n)
+        & (b + 1 <= hi * n)
     )
     p0, d, count = _other_way(mesh, corridor, v, a, b)
     new, new_n, fits = _apply_flips(mesh, corridor, n, ok, v, a, b, p0, d, count)
@@ -697,17 +708,18 @@ def exact_solve(
     # rounds takes the detours of the best path so far, k at a time. All phases
     # run through one `_refine` inside a fori_loop: it is the bulk of the program,
     # and compiled once instead of once per phase (a third of the compile time).
-    walls_k = [(left, w) for w in WALL_STRETCHES for left in (True, False)]
+    n_walls = 2 * len(WALL_STRETCHES)
     cone_chunks = -(-detours // k) if detours else 0
-    chunks = cone_chunks + (-(-len(walls_k) // k) if walls else 0)
+    chunks = cone_chunks + (-(-n_walls // k) if walls else 0)
     phases = 1 + chunks * detour_rounds
 
     def walls_of(c, m_, a, b):  # padded to whole chunks with unused corridors
-        out = [_wall_flip(smesh, c, m_, a, b, left, w) for left, w in walls_k]
-        used = len(out)
-        out += [(c, m_, jnp.asarray(False))] * (-used % k)
-        corridor, n, fits = (jnp.stack(x) for x in zip(*out))
-        return corridor, n, fits, jnp.arange(len(out)) < used
+        corridor, n, fits = _wall_flips(smesh, c, m_, a, b)
+        pad = -n_walls % k
+        corridor = jnp.concatenate([corridor, jnp.broadcast_to(c, (pad,) + c.shape)])
+        n = jnp.concatenate([n, jnp.full(pad, m_)])
+        fits = jnp.concatenate([fits, jnp.zeros(pad, bool)])
+        return corridor, n, fits, jnp.arange(n_walls + pad) < n_walls
 
     def detours_of(win: _Lane):
         parts = []

@@ -298,10 +298,11 @@ def test_collinear_wall_vertices_on_the_catenoid():
 
 @pytest.mark.slow  # its own compile (README tests <= 5 min)
 def test_a_wall_flip_moves_the_corridor_across_its_whole_wall():
-    """`exact._wall_flip`: a corridor of faces that share edges, from the start's
-    face to the end's, that passes every flippable vertex of the old left wall on
-    its other side (consecutive wall vertices share a face: `_apply_flips` joins
-    their fans, `_clean` removes the backtrack)."""
+    """`exact._wall_flip` (the first of `_wall_flips`: the whole left wall): a
+    corridor of faces that share edges, from the start's face to the end's, that
+    passes every flippable vertex of the old left wall on its other side
+    (consecutive wall vertices share a face: `_apply_flips` joins their fans,
+    `_clean` removes the backtrack)."""
     from jaxgeo import exact
 
     from .test_sleeve import _starts
@@ -313,7 +314,8 @@ def test_a_wall_flip_moves_the_corridor_across_its_whole_wall():
 
     def one(c, m, s_, t_):
         old = exact._sleeve_of(mesh, c, m, s_, t_)
-        new_c, new_n, fits = exact._wall_flip(mesh, c, m, s_, t_, left=True)
+        walls = exact._wall_flips(mesh, c, m, s_, t_)  # 0: the whole left wall
+        new_c, new_n, fits = (x[0] for x in walls)
         return old, exact._sleeve_of(mesh, new_c, new_n, s_, t_), new_c, new_n, fits
 
     old, new, new_c, new_n, fits = jax.jit(jax.vmap(one))(corridor, n, s, t)
