@@ -85,14 +85,14 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=60)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--starts", type=int, default=None, help="Exact(max_starts=N)")
-    ap.add_argument("--walls", action="store_true", help="Exact(walls=True)")
+    ap.add_argument("--no-walls", action="store_true", help="Exact(walls=False)")
     ap.add_argument("--detours", type=int, default=None, help="Exact(detours=N)")
     ap.add_argument("--detour-rounds", type=int, default=None)
     ap.add_argument("--only", default=None, help="meshes whose name contains this")
     args = ap.parse_args()
     options = {
         "max_starts": args.starts,
-        "walls": args.walls or None,
+        "walls": False if args.no_walls else None,
         "detours": args.detours,
         "detour_rounds": args.detour_rounds,
     }

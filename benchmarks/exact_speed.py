@@ -48,10 +48,19 @@ def main() -> None:
     ap.add_argument(
         "--starts", type=int, default=None, help="Exact(max_starts=...) (default: its)"
     )
+    ap.add_argument("--detours", type=int, default=None, help="Exact(detours=N)")
+    ap.add_argument("--detour-rounds", type=int, default=None)
+    ap.add_argument("--no-walls", action="store_true", help="Exact(walls=False)")
     args = ap.parse_args()
     import potpourri3d as pp3d
 
-    method = jg.Exact() if args.starts is None else jg.Exact(max_starts=args.starts)
+    options = {
+        "max_starts": args.starts,
+        "detours": args.detours,
+        "detour_rounds": args.detour_rounds,
+        "walls": False if args.no_walls else None,
+    }
+    method = jg.Exact(**{k: x for k, x in options.items() if x is not None})
     print(method)
 
     if args.mesh == "catenoid":
