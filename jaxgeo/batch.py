@@ -104,7 +104,8 @@ def _check_same_on_all_processes(mesh: Mesh, a: np.ndarray, b: np.ndarray) -> No
     from jax.experimental import multihost_utils
 
     parts = (a, b, np.asarray(mesh.vertices), np.asarray(mesh.faces))
-    sums = np.array([zlib.crc32(np.ascontiguousarray(x)) for x in parts], np.uint32)
+    # (an ndarray is a buffer; numpy's stubs say so only for Python >= 3.12)
+    sums = np.array([zlib.crc32(np.ascontiguousarray(x)) for x in parts], np.uint32)  # pyright: ignore[reportArgumentType]
     every = np.asarray(multihost_utils.process_allgather(sums))  # (processes, 4)
     differ = np.flatnonzero(np.any(every != every[0], axis=1))
     if differ.size:
@@ -207,7 +208,8 @@ def shortest_paths(
             chunk = [jax.device_put(x, sharding) for x in chunk]
 
         def run(method, chunk=chunk, k=stop - start):
-            paths = _solve_chunk(padded, *chunk, limit, method, max_points)
+            # (pyright misreads *args of unknown length followed by more arguments)
+            paths = _solve_chunk(padded, *chunk, limit, method, max_points)  # pyright: ignore[reportCallIssue]
             if jax.process_count() > 1:
                 jax.block_until_ready(paths)
                 _wait_for_all_processes()

@@ -156,7 +156,10 @@ def _build_strip(
     elements = jnp.where(
         idx == 0, start.face, jnp.where(is_end, end.face, elements)
     ).astype(jnp.int32)
-    bary = jnp.where((idx == 0)[:, None], start.bary, end.bary).astype(dtype)
+    bary = jnp.where(
+        (idx == 0)[:, None], jnp.asarray(start.bary), jnp.asarray(end.bary)
+    )
+    bary = bary.astype(dtype)
 
     width = max(mesh.vertex_faces.shape[1], 2)
 

@@ -34,6 +34,7 @@ import os
 import sys
 import time
 import typing
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cache
 from typing import NamedTuple
@@ -44,6 +45,10 @@ import scipy.optimize
 from jaxtyping import ArrayLike, Float
 
 from ._errors import JaxgeoError
+
+#: A point as these functions take it: an array, or a list or tuple of floats
+#: (jaxtyping's `ArrayLike`, JAX's, has no lists or tuples).
+_Point = ArrayLike | Sequence[float]
 
 __all__ = [
     "CatenoidGeodesic",
@@ -66,10 +71,10 @@ _E_MIN = 1e-200
 
 
 def great_circle_length(
-    p: Float[ArrayLike, "*batch 3"],
-    q: Float[ArrayLike, "*batch 3"],
+    p: Float[ArrayLike, "*#batch 3"],
+    q: Float[ArrayLike, "*#batch 3"],
     radius: float = 1.0,
-) -> Float[np.ndarray, " *batch"]:
+) -> Float[np.ndarray, " *#batch"] | float:
     """Great-circle distance radius·∠(p, q) = radius·atan2(|p × q|, p·q).
 
     The atan2 form is accurate for nearly equal and nearly antipodal points (arccos
@@ -93,7 +98,7 @@ def _default_c() -> float:
     return catenoid_parameter(1.0, 1.0)
 
 
-def _theta_z(p: ArrayLike) -> tuple[float, float]:
+def _theta_z(p: _Point) -> tuple[float, float]:
     """A point given as 3-D (x, y, z) or as surface coordinates (θ, z)."""
     p = np.asarray(p, dtype=np.float64).ravel()
     if p.shape == (3,):
@@ -279,7 +284,7 @@ def _geodesics_with_travel(alpha: float, w1: float, w2: float, c: float):
 
 
 def catenoid_geodesics(
-    p: ArrayLike, q: ArrayLike, c: float | None = None
+    p: _Point, q: _Point, c: float | None = None
 ) -> list[CatenoidGeodesic]:
     """All geodesics from p to q on the catenoid r(z) = c·cosh(z/c) that sweep at
     most one turn in θ, in both directions, sorted by length (shortest first).
@@ -305,9 +310,7 @@ def catenoid_geodesics(
     return sorted(result, key=lambda g: g.length)
 
 
-def catenoid_geodesic_length(
-    p: ArrayLike, q: ArrayLike, c: float | None = None
-) -> float:
+def catenoid_geodesic_length(p: _Point, q: _Point, c: float | None = None) -> float:
     """Length of the shortest geodesic from p to q on the catenoid r(z) = c·cosh(z/c).
 
     p, q as (x, y, z) or (θ, z); c defaults to the catenoid spanning rings of radius 1
@@ -320,8 +323,8 @@ def catenoid_geodesic_length(
 
 
 def _catenoid_geodesic_length_shooting(
-    p: ArrayLike,
-    q: ArrayLike,
+    p: _Point,
+    q: _Point,
     c: float | None = None,
     travel: float | None = None,
     guess: tuple[float, float] | None = None,
@@ -413,7 +416,7 @@ def great_circle_points(
 
 
 def catenoid_geodesic_points(
-    p: ArrayLike, q: ArrayLike, n: int = 100, c: float | None = None
+    p: _Point, q: _Point, n: int = 100, c: float | None = None
 ) -> Float[np.ndarray, "n 3"]:
     """`n` points, equally spaced in arc length, of the shortest catenoid geodesic
     from p to q (given as (x, y, z) or (θ, z)).
@@ -456,7 +459,7 @@ def catenoid_geodesic_points(
 
 
 def catenoid_descent_curve(
-    p: ArrayLike, q: ArrayLike, n: int = 100, c: float | None = None
+    p: _Point, q: _Point, n: int = 100, c: float | None = None
 ) -> tuple[float, Float[np.ndarray, "n 3"]]:
     """The continuous limit of the sliding laser ray on the catenoid: the curve of
     steepest descent of the Euclidean distance to q, from p.
@@ -855,9 +858,10 @@ class Table:
         """Write `columns()` as CSV (full precision)."""
         cols = self.columns()
         if not hasattr(file, "write"):
-            with open(file, "w", newline="") as f:
+            # (hasattr(file, 'write') told a path from a text file)
+            with open(file, "w", newline="") as f:  # pyright: ignore[reportCallIssue, reportArgumentType]
                 return self.to_csv(f)
-        w = csv.writer(file)
+        w = csv.writer(file)  # pyright: ignore[reportArgumentType]
         w.writerow(cols)
         for row in zip(*cols.values()):
             w.writerow([repr(x) if isinstance(x, float) else x for x in row])
@@ -956,9 +960,9 @@ def _groups(rows: list[Row]) -> dict[tuple[str, int], list[Row]]:
 
 def run_suite(
     suite: Suite,
-    methods: typing.Sequence[str] | None = None,
+    methods: Sequence[str] | None = None,
     exact_solver: str = "auto",
-    progress: typing.Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | None = None,
     **solver_options: typing.Any,
 ) -> Table:
     """Solve every pair of `suite` with every method and the exact polyhedral solver.
@@ -1009,15 +1013,26 @@ def run_suite(
         say(f"{tag} {m}: compiling ({mesh.n_faces} faces)")
         t0 = time.perf_counter()
         first = suite.pairs[0]
+        # (m: a method's name as given; shortest_path rejects an unknown one)
         path = shortest_path(
-            mesh, v[first.v1], v[first.v2], method=m, throw=False, **solver_options
+            mesh,
+            v[first.v1],
+            v[first.v2],
+            method=m,  # pyright: ignore[reportArgumentType]
+            throw=False,
+            **solver_options,
         )
         float(path.length)
         table.compile_time[(suite.name, suite.resolution, m)] = time.perf_counter() - t0
         for k, (p, row) in enumerate(zip(suite.pairs, rows)):
             t0 = time.perf_counter()
             path = shortest_path(
-                mesh, v[p.v1], v[p.v2], method=m, throw=False, **solver_options
+                mesh,
+                v[p.v1],
+                v[p.v2],
+                method=m,  # pyright: ignore[reportArgumentType]
+                throw=False,
+                **solver_options,
             )
             length = float(path.length)
             dt = time.perf_counter() - t0
@@ -1039,11 +1054,11 @@ def _merge(tables: list[Table]) -> Table:
 
 
 def validate(
-    resolutions: int | typing.Sequence[int] = 4,
-    suites: typing.Sequence[str] = ("sphere", "catenoid"),
-    methods: typing.Sequence[str] | None = None,
+    resolutions: int | Sequence[int] = 4,
+    suites: Sequence[str] = ("sphere", "catenoid"),
+    methods: Sequence[str] | None = None,
     exact_solver: str = "auto",
-    progress: typing.Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | None = None,
     **solver_options: typing.Any,
 ) -> Table:
     """Run the named suites (`SUITES`) at one or several resolutions; see
@@ -1093,7 +1108,7 @@ def _median_abs(xs: list[float]) -> float:
 
 
 def summary_markdown(
-    summary: list[dict[str, typing.Any]], methods: typing.Sequence[str]
+    summary: list[dict[str, typing.Any]], methods: Sequence[str]
 ) -> str:
     """`convergence_summary` as a Markdown table (median |error| in per cent)."""
     head = ["suite", "resolution", "faces", "mean edge", "exact polyhedral"]
@@ -1126,7 +1141,7 @@ def _loglog(ax, entries: list[dict[str, typing.Any]], key: str, **kw) -> None:
 
 def plot_convergence(
     summary: list[dict[str, typing.Any]],
-    methods: typing.Sequence[str],
+    methods: Sequence[str],
     file=None,
     axes=None,
 ):

@@ -41,6 +41,7 @@ from .._errors import JaxgeoError
 from ..boundary import PackedLoops, packed_point
 from ..geodesic import shortest_path
 from ..mesh import Mesh
+from ..methods import Method
 from ..path import Status
 from .compensate import CutCloth
 from .material import Material, Prestress
@@ -63,7 +64,7 @@ class Settings(eqx.Module):
     roll_width: float
     waste: float = 0.1
     fit: float = 10.0
-    method: str = eqx.field(static=True, default="laser")
+    method: Method = eqx.field(static=True, default="laser")
     max_points: int = eqx.field(static=True, default=160)
     #: linear solver of the flattening's Gauss-Newton steps and its adjoint:
     #: "qr" (dense: ~1e10 flops per step for a cloth of 1000 faces), "lsmr"
@@ -160,6 +161,7 @@ def make_template(
     rot = np.zeros((C, 2, 2))
     for k, cc in enumerate(cloths):
         c = cc.cloth
+        assert c.vertex_ids is not None  # (make_pattern sets it)
         n, f = len(c.vertex_ids), c.faces
         e = _edges(f)
         if n > cap.cloth_vertices or len(e) > cap.cloth_edges:
