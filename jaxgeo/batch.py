@@ -123,12 +123,12 @@ def _device_sharding() -> NamedSharding | None:
     return NamedSharding(grid, PartitionSpec("batch"))
 
 
-def chunk_size_for(n: int, chunk_size: int) -> int:
+def chunk_size_for(n: int, chunk_size: int | np.integer) -> int:
     """The chunk size for a batch of `n` pairs: `chunk_size`, or for a smaller
     batch the next power of two ≥ `n` (capped at `chunk_size`), so that a small
     batch does not solve `chunk_size` lanes of padding and the compiled sizes stay
     a small set (1, 2, 4, …, `chunk_size`)."""
-    return min(chunk_size, 1 << max(n - 1, 0).bit_length())
+    return min(int(chunk_size), 1 << max(n - 1, 0).bit_length())
 
 
 def shortest_paths(
@@ -138,10 +138,10 @@ def shortest_paths(
     *,
     method: Method = "exact",
     candidates: Literal["local", "all"] | None = None,
-    max_points: int = 1024,
+    max_points: int | np.integer = 1024,
     normals: Weighting | None = None,
     max_distance: float = DEFAULT_MAX_DISTANCE,
-    chunk_size: int = 256,
+    chunk_size: int | np.integer = 256,
     shard: bool = True,
     throw: bool = True,
     progress: Callable[[int, int], None] | None = None,

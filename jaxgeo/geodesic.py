@@ -138,7 +138,7 @@ def shortest_path(
     *,
     method: Method = "exact",
     candidates: Literal["local", "all"] | None = None,
-    max_points: int = 1024,
+    max_points: int | np.integer = 1024,
     normals: Weighting | None = None,
     max_distance: float = DEFAULT_MAX_DISTANCE,
     throw: bool = True,
