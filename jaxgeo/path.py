@@ -100,7 +100,7 @@ class Path(eqx.Module):
     stats: dict[str, Int[Array, "*B"]] | None = None
 
     @property
-    def ok(self) -> Bool[Array, ""]:
+    def ok(self) -> Bool[Array, "*B"]:
         return self.status == Status.SUCCESS
 
     @property

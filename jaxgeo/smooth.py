@@ -814,11 +814,11 @@ class SmoothResult(eqx.Module):
     repair rounds that changed the strip, and the vertex contacts released."""
 
     path: SmoothPath
-    rounds: Int[Array, ""]
-    releases: Int[Array, ""]
+    rounds: Int[Array, "*B"]  # (leading axes B when batched, as under vmap)
+    releases: Int[Array, "*B"]
 
     @property
-    def ok(self) -> Bool[Array, ""]:
+    def ok(self) -> Bool[Array, "*B"]:
         """Converged on a valid strip (the pipeline's SUCCESS)."""
         return self.path.converged & self.path.valid_strip
 
