@@ -41,7 +41,8 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> str:
         path = os.environ.get("JAX_COMPILATION_CACHE_DIR") or DEFAULT_CACHE_DIR
     path = os.path.abspath(os.path.expanduser(os.fspath(path)))
     os.makedirs(path, exist_ok=True)
-    if jax.config.jax_compilation_cache_dir != path:
+    # (JAX's flags are attributes that jax.config sets at run time)
+    if jax.config.jax_compilation_cache_dir != path:  # pyright: ignore[reportAttributeAccessIssue]
         jax.config.update("jax_compilation_cache_dir", path)
         # JAX opens its cache once, at the first compilation: start over so that a
         # call after some compilations (or with a new path) takes effect.

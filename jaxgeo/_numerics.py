@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
 
-def safe_norm(x: Float[Array, "... 3"], axis: int = -1) -> Float[Array, "..."]:
+def safe_norm(x: Float[Array, "..."], axis: int = -1) -> Float[Array, "..."]:
     """Euclidean norm whose gradient is 0 (not NaN) at x = 0."""
     sq = jnp.sum(x * x, axis=axis)
     positive = sq > 0
@@ -43,7 +44,7 @@ def run_of(counts: Int[Array, " N"], size: int) -> Int[Array, " size"]:
 
 
 def corner_angles(
-    vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]
+    vertices: Float[Array | np.ndarray, "V 3"], faces: Int[Array | np.ndarray, "F 3"]
 ) -> Float[Array, "F 3"]:
     """The angle of every face at each of its corners (differentiable)."""
     p = vertices[faces]  # (F, 3, 3)

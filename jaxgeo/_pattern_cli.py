@@ -147,8 +147,8 @@ def run_pattern(args: argparse.Namespace) -> int:
     from .export import write_seams_obj
     from .mesh import load_mesh
 
-    if args.seams < 1 or not args.roll_width > 0:
-        return _usage("--seams must be >= 1 and --roll-width > 0")
+    if args.seams < 1 or args.rounds < 1 or not args.roll_width > 0:
+        return _usage("--seams and --rounds must be >= 1 and --roll-width > 0")
     try:
         material = Material(*args.material)
         prestress = Prestress(*args.prestress)
@@ -192,6 +192,7 @@ def run_pattern(args: argparse.Namespace) -> int:
             method=args.method,
             log=log,
         )
+        assert first is not None  # (fit_roll ran at least one round)
         j_start = first.j_start
         rounds = [{"objective": j, "widest": w} for j, w in history]
         j_end = history[-1][0] if history else j_start

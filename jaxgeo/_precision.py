@@ -65,7 +65,8 @@ def warn_if_x64_disabled(*arrays: Any) -> bool:
     while `jax_enable_x64` is off. Python floats and lists count as float64, as
     numpy reads them. Returns whether the condition holds (warned now or before)."""
     global _warned
-    if jax.config.jax_enable_x64 or not any(_is_float64(a) for a in arrays):
+    # (JAX's flags are attributes that jax.config sets at run time)
+    if jax.config.jax_enable_x64 or not any(_is_float64(a) for a in arrays):  # pyright: ignore[reportAttributeAccessIssue]
         return False
     if not _warned:
         _warned = True

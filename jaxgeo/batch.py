@@ -104,7 +104,8 @@ def _check_same_on_all_processes(mesh: Mesh, a: np.ndarray, b: np.ndarray) -> No
     from jax.experimental import multihost_utils
 
     parts = (a, b, np.asarray(mesh.vertices), np.asarray(mesh.faces))
-    sums = np.array([zlib.crc32(np.ascontiguousarray(x)) for x in parts], np.uint32)
+    # (an ndarray is a buffer; numpy's stubs say so only for Python >= 3.12)
+    sums = np.array([zlib.crc32(np.ascontiguousarray(x)) for x in parts], np.uint32)  # pyright: ignore[reportArgumentType]
     every = np.asarray(multihost_utils.process_allgather(sums))  # (processes, 4)
     differ = np.flatnonzero(np.any(every != every[0], axis=1))
     if differ.size:
@@ -122,12 +123,12 @@ def _device_sharding() -> NamedSharding | None:
     return NamedSharding(grid, PartitionSpec("batch"))
 
 
-def chunk_size_for(n: int, chunk_size: int) -> int:
+def chunk_size_for(n: int, chunk_size: int | np.integer) -> int:
     """The chunk size for a batch of `n` pairs: `chunk_size`, or for a smaller
     batch the next power of two ≥ `n` (capped at `chunk_size`), so that a small
     batch does not solve `chunk_size` lanes of padding and the compiled sizes stay
     a small set (1, 2, 4, …, `chunk_size`)."""
-    return min(chunk_size, 1 << max(n - 1, 0).bit_length())
+    return min(int(chunk_size), 1 << max(n - 1, 0).bit_length())
 
 
 def shortest_paths(
@@ -137,10 +138,10 @@ def shortest_paths(
     *,
     method: Method = "exact",
     candidates: Literal["local", "all"] | None = None,
-    max_points: int = 1024,
+    max_points: int | np.integer = 1024,
     normals: Weighting | None = None,
     max_distance: float = DEFAULT_MAX_DISTANCE,
-    chunk_size: int = 256,
+    chunk_size: int | np.integer = 256,
     shard: bool = True,
     throw: bool = True,
     progress: Callable[[int, int], None] | None = None,
@@ -207,7 +208,8 @@ def shortest_paths(
             chunk = [jax.device_put(x, sharding) for x in chunk]
 
         def run(method, chunk=chunk, k=stop - start):
-            paths = _solve_chunk(padded, *chunk, limit, method, max_points)
+            # (pyright misreads *args of unknown length followed by more arguments)
+            paths = _solve_chunk(padded, *chunk, limit, method, max_points)  # pyright: ignore[reportCallIssue]
             if jax.process_count() > 1:
                 jax.block_until_ready(paths)
                 _wait_for_all_processes()

@@ -10,6 +10,8 @@ the boundary under `jax.grad`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -49,7 +51,7 @@ class BoundaryLoop(eqx.Module):
     def size(self) -> int:
         return int(self.vertices.shape[0])
 
-    def cumulative(self, mesh: Mesh) -> Float[Array, " n+1"]:
+    def cumulative(self, mesh: Mesh) -> Float[Array, " n_plus_1"]:
         """Arc length at each loop vertex, from 0 to the perimeter (closing vertex
         included)."""
         p = mesh.vertices[self.vertices]
@@ -202,7 +204,9 @@ def loop_point(
     return SurfacePoint(loop.faces[i], bary)
 
 
-def loop_parameter(mesh: Mesh, loop: BoundaryLoop, point: ArrayLike) -> float:
+def loop_parameter(
+    mesh: Mesh, loop: BoundaryLoop, point: ArrayLike | Sequence[float]
+) -> float:
     """The normalised arc length `s` of the loop point nearest to a 3-D `point`
     (numpy; for building layouts from coordinates)."""
     p = np.asarray(point, float)

@@ -124,7 +124,7 @@ def _cmd_path(args: argparse.Namespace) -> int:
         f"{name}: {mesh.n_faces} faces; {text1} -> {text2}: length "
         f"{float(path.length):.10g}, {int(path.count)} points, "
         f"{int(path.n_branch_points)} branch points, method {args.method}"
-        + (f"; {fmt.upper()} written to {args.output}" if args.output else "")
+        + (f"; {fmt.upper()} written to {args.output}" if args.output and fmt else "")
     )
     # stdout carries the summary, unless it carries the data
     data_on_stdout = fmt is not None and not args.output

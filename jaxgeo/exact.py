@@ -62,14 +62,15 @@ __all__ = ["ExactStats", "exact_solve", "vertex_angle_sums"]
 class ExactStats(eqx.Module):
     """Diagnostics of one exact solve (as optimistix's `Solution.stats`)."""
 
-    iterations: Int[Array, ""]  # flip rounds of the winning start
-    flips: Int[Array, ""]  # wedge flips made by the winning start
-    starts: Int[Array, ""]  # starts refined
-    starts_converged: Int[Array, ""]
-    corridor_length: Int[Array, ""]  # faces in the final corridor
+    # (leading axes B in a batch of paths)
+    iterations: Int[Array, "*B"]  # flip rounds of the winning start
+    flips: Int[Array, "*B"]  # wedge flips made by the winning start
+    starts: Int[Array, "*B"]  # starts refined
+    starts_converged: Int[Array, "*B"]
+    corridor_length: Int[Array, "*B"]  # faces in the final corridor
     #: 1 if a lane's corridor outgrew `corridor_capacity` (its path then failed,
     #: or another may be shorter): solve again with a larger capacity
-    outgrew: Int[Array, ""]
+    outgrew: Int[Array, "*B"]
 
 
 def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
@@ -106,11 +107,12 @@ class _End(eqx.Module):
 
 
 def _end(mesh: Mesh, sp: SurfacePoint) -> _End:
-    b = sp.bary / jnp.sum(sp.bary)
+    face, b = jnp.asarray(sp.face), jnp.asarray(sp.bary)
+    b = b / jnp.sum(b)
     tol = _snap_tol(b.dtype)
-    kind, index = snap(mesh, SurfacePoint(sp.face, b), tol)
+    kind, index = snap(mesh, SurfacePoint(face, b), tol)
     b = jnp.where(b <= tol, 0.0, b)
-    return _End(sp.face, b / jnp.sum(b), kind, index)
+    return _End(face, b / jnp.sum(b), kind, index)
 
 
 def _contains(mesh: Mesh, end: _End, faces):
@@ -406,16 +408,16 @@ def _sleeve_of(mesh: Mesh, corridor, n, s: _End, t: _End):
 # --------------------------------------------------------------- the flip loop
 
 
-class _Lane(eqx.Module):
-    corridor: Int[Array, " C"]
-    n: Int[Array, ""]
-    pinned: Int[Array, " C+2"]  # the taut string's pins (`_sleeve.funnel`)
-    m: Int[Array, ""]
-    length: Float[Array, ""]
-    iterations: Int[Array, ""]
-    flips: Int[Array, ""]
-    status: Int[Array, ""]
-    done: Bool[Array, ""]
+class _Lane(eqx.Module):  # one lane, or L of them (leading axes)
+    corridor: Int[Array, "*L C"]
+    n: Int[Array, "*L"]
+    pinned: Int[Array, "*L C+2"]  # the taut string's pins (`_sleeve.funnel`)
+    m: Int[Array, "*L"]
+    length: Float[Array, "*L"]
+    iterations: Int[Array, "*L"]
+    flips: Int[Array, "*L"]
+    status: Int[Array, "*L"]
+    done: Bool[Array, "*L"]
 
 
 #: Lane batches up to this size are refined one lane per start; larger ones by a
@@ -701,7 +703,8 @@ def exact_solve(
         return jnp.repeat(x, k, axis=0)
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
-    starts = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(
+    # (pyright misreads *args of unknown length followed by more arguments)
+    starts = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(  # pyright: ignore[reportCallIssue]
         slots.reshape(-1), slot_ok.reshape(-1), lanes_of(vs), lanes_of(vt), s_l, t_l
     )
     # Phase 0 refines the k starts of every pair; then each of `detour_rounds`
@@ -808,7 +811,8 @@ def exact_solve(
         corridor_length=win.n,
         outgrew=outgrew.astype(jnp.int32),
     )
-    return jax.vmap(lambda *a: _finish(mesh, *a, max_points))(
+    # (pyright misreads *args of unknown length followed by more arguments)
+    return jax.vmap(lambda *a: _finish(mesh, *a, max_points))(  # pyright: ignore[reportCallIssue]
         start, end, s, t, win.corridor, win.n, status, stats
     )
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
 import equinox as eqx
@@ -33,7 +34,7 @@ from .path import Path, Status
 
 __all__ = ["METHODS", "Method", "path_length", "shortest_path", "solve"]
 
-Endpoint = ArrayLike | SurfacePoint
+Endpoint = ArrayLike | Sequence[float] | SurfacePoint
 
 
 def as_surface_point(mesh: Mesh, p: Endpoint):
@@ -43,14 +44,16 @@ def as_surface_point(mesh: Mesh, p: Endpoint):
     face; `solve` gives such a pair `Status.INVALID_ENDPOINT`)."""
     dtype = mesh.vertices.dtype
     if isinstance(p, SurfacePoint):
-        sp = SurfacePoint(jnp.asarray(p.face), jnp.asarray(p.bary, dtype))
-        inside = (sp.face >= 0) & (sp.face < mesh.n_faces)
+        face = jnp.asarray(p.face)
+        sp = SurfacePoint(face, jnp.asarray(p.bary, dtype))
+        inside = (face >= 0) & (face < mesh.n_faces)
         # a padded mesh's filler faces belong to no component (`jaxgeo._padding`)
-        ok = inside & (mesh.face_component[jnp.where(inside, sp.face, 0)] >= 0)
+        ok = inside & (mesh.face_component[jnp.where(inside, face, 0)] >= 0)
         return sp, jnp.where(ok, 0.0, jnp.nan).astype(dtype)
     if is_vertex_index(p):
-        ok = vertex_valid(mesh, p)
-        return SurfacePoint.vertex(mesh, p), jnp.where(ok, 0.0, jnp.nan).astype(dtype)
+        i = jnp.asarray(p)  # (an integer scalar)
+        ok = vertex_valid(mesh, i)
+        return SurfacePoint.vertex(mesh, i), jnp.where(ok, 0.0, jnp.nan).astype(dtype)
     return locate(mesh, jnp.asarray(p, dtype))
 
 
@@ -91,10 +94,11 @@ def solve(
 def _stand_in(sp: SurfacePoint, bad) -> SurfacePoint:
     """`sp`, with the centroid of face 0 in the rows where it is not a point of
     the mesh (so that no method indexes out of range or meets NaN)."""
-    third = jnp.full((3,), 1 / 3, sp.bary.dtype)
+    face, bary = jnp.asarray(sp.face), jnp.asarray(sp.bary)
+    third = jnp.full((3,), 1 / 3, bary.dtype)
     return SurfacePoint(
-        jnp.where(bad, 0, sp.face).astype(sp.face.dtype),
-        jnp.where(bad[:, None], third, sp.bary),
+        jnp.where(bad, 0, face).astype(face.dtype),
+        jnp.where(bad[:, None], third, bary),
     )
 
 
@@ -122,7 +126,8 @@ def _solve_one(mesh, p1, p2, max_distance, method, max_points, differentiable):
     start, d1 = as_surface_point(mesh, p1)
     end, d2 = as_surface_point(mesh, p2)
     batch = jax.tree.map(lambda x: x[None], (start, end, d1, d2))
-    path = solve(mesh, *batch, max_distance, method, max_points, differentiable)
+    # (pyright misreads *args of unknown length followed by more arguments)
+    path = solve(mesh, *batch, max_distance, method, max_points, differentiable)  # pyright: ignore[reportCallIssue]
     return jax.tree.map(lambda x: x[0], path), jnp.stack([d1, d2])
 
 
@@ -133,7 +138,7 @@ def shortest_path(
     *,
     method: Method = "exact",
     candidates: Literal["local", "all"] | None = None,
-    max_points: int = 1024,
+    max_points: int | np.integer = 1024,
     normals: Weighting | None = None,
     max_distance: float = DEFAULT_MAX_DISTANCE,
     throw: bool = True,

@@ -3,6 +3,8 @@ nearest point of the mesh to a 3-D point."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -25,11 +27,13 @@ class SurfacePoint(eqx.Module):
     Differentiable in `bary` (e.g. to slide an endpoint along a boundary edge).
     """
 
-    face: Int[Array, ""]
-    bary: Float[Array, "3"]
+    # (any array-like, as given; batched alike, with leading axes B: in a batch of
+    # paths and inside `shortest_path`'s solver)
+    face: Int[ArrayLike, "*B"]
+    bary: Float[ArrayLike, "*B 3"] | Sequence[float]
 
     def position(self, mesh: Mesh) -> Float[Array, "3"]:
-        return self.bary @ mesh.vertices[mesh.faces[self.face]]
+        return jnp.asarray(self.bary) @ mesh.vertices[mesh.faces[self.face]]
 
     @classmethod
     def vertex(cls, mesh: Mesh, i: Int[ArrayLike, ""]) -> SurfacePoint:
@@ -222,9 +226,10 @@ def snap(
 ) -> tuple[Int[Array, ""], Int[Array, ""]]:
     """The mesh element a surface point lies on, as `(kind, index)`: kind 0 a face,
     1 an edge, 2 a vertex. Barycentric coordinates below `tol` count as zero."""
-    small = sp.bary <= tol
+    bary = jnp.asarray(sp.bary)
+    small = bary <= tol
     n_small = jnp.sum(small)
-    corner = jnp.argmax(sp.bary)
+    corner = jnp.argmax(bary)
     edge_corner = jnp.argmax(small)
     kind = jnp.where(n_small >= 2, 2, jnp.where(n_small == 1, 1, 0))
     index = jnp.where(

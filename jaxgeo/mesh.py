@@ -15,10 +15,11 @@ import os
 import re
 import sys
 import warnings
-from typing import Any, Literal
+from typing import Any, Literal, NoReturn
 
 import equinox as eqx
 import jax.numpy as jnp
+import jaxtyping
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph  # noqa: F401
@@ -45,7 +46,7 @@ DEGENERATE_AREA_RATIO = 1e-8
 _ZERO_AREA_RATIO = 64 * float(np.finfo(np.float64).eps)
 
 
-def _unique_pairs(pairs: np.ndarray, **kwargs):
+def _unique_pairs(pairs: np.ndarray, **kwargs) -> Any:  # as np.unique's
     """`np.unique(pairs, axis=0, ...)` for `(N, 2)` non-negative integers, through
     one int64 key per row (a 1-D sort: ~20x faster than sorting rows)."""
     pairs = np.asarray(pairs, dtype=np.int64)
@@ -58,7 +59,7 @@ def _unique_pairs(pairs: np.ndarray, **kwargs):
     return (first, *rest) if rest else first
 
 
-def _fail(problem: str, indices: Any = None, *, limit: int = 10) -> None:
+def _fail(problem: str, indices: Any = None, *, limit: int = 10) -> NoReturn:
     """Raise `JaxgeoError(problem)`, listing up to `limit` indices (or index pairs
     when `indices` is 2-D)."""
     if indices is not None:
@@ -282,12 +283,21 @@ def _check_vertex_fans(f: np.ndarray, n_vertices: int) -> None:
 
 def _caller_stacklevel() -> int:
     """The `stacklevel` that points a warning at the first frame outside jaxgeo and
-    equinox (whose module machinery wraps `Mesh.__init__`)."""
+    equinox (whose module machinery wraps `Mesh.__init__`), and outside the type
+    checks that jaxtyping's import hook wraps round jaxgeo's functions in tests
+    (jaxtyping's frames and beartype's generated `<@beartype(...)>` ones)."""
     here = os.path.dirname(os.path.abspath(__file__))
-    internal = (here, os.path.dirname(os.path.abspath(eqx.__file__)))
+    internal = tuple(
+        os.path.dirname(os.path.abspath(f))
+        for f in (__file__, eqx.__file__, jaxtyping.__file__)
+    )
     frame, level = sys._getframe(1), 1
-    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(
-        internal
+    # the frame that calls warnings.warn: our caller, past the checks round us
+    while frame is not None and not frame.f_code.co_filename.startswith(here):
+        frame = frame.f_back
+    while frame is not None and (
+        os.path.abspath(frame.f_code.co_filename).startswith(internal)
+        or frame.f_code.co_filename.startswith("<@beartype")
     ):
         frame, level = frame.f_back, level + 1
     return level

@@ -130,7 +130,7 @@ class Smooth(eqx.Module):
             g = good.reshape(good.shape + (1,) * (a.ndim - 1))
             return jnp.where(g, a, b)
 
-        stats = dict(ex.stats, repair_rounds=r.rounds, releases=r.releases)
+        stats = dict(ex.stats or {}, repair_rounds=r.rounds, releases=r.releases)
         return Path(
             points=pick(sp.points, ex.points),
             kinds=pick(sp.kinds, ex.kinds),

@@ -7,7 +7,8 @@ from typing import TYPE_CHECKING, Literal
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._errors import JaxgeoError
 from ._numerics import corner_angles, safe_normalize
@@ -36,7 +37,10 @@ def _check_mesh_arrays(vertices, faces) -> None:
 
 
 def face_normals(
-    vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"], *, unit: bool = True
+    vertices: Float[Array | np.ndarray, "V 3"],
+    faces: Int[Array | np.ndarray, "F 3"],
+    *,
+    unit: bool = True,
 ) -> Float[Array, "F 3"]:
     """Normals of the faces, `(b − a) × (c − a)`; unit length unless `unit=False`
     (then their length is twice the face area)."""
@@ -47,8 +51,8 @@ def face_normals(
 
 
 def vertex_normals(
-    vertices: Float[Array, "V 3"],
-    faces: Int[Array, "F 3"],
+    vertices: Float[Array | np.ndarray, "V 3"],
+    faces: Int[Array | np.ndarray, "F 3"],
     weighting: Weighting = "uniform",
 ) -> Float[Array, "V 3"]:
     """Phong vertex normals.
@@ -107,7 +111,7 @@ def _boundary_vertices(mesh: Mesh) -> Bool[Array, " V"]:
     return hits > 0
 
 
-def _fit_stencil(mesh: Mesh, verts: Int[Array, " B"]) -> Int[Array, "B 9K²"]:
+def _fit_stencil(mesh: Mesh, verts: Int[Array, " B"]) -> Int[Array, "B S"]:  # S = 9K²
     """Per vertex v of `verts`, its two-ring: the vertices of the faces that touch
     v's neighbours (v excluded; 11 points at a regular boundary vertex of a
     triangulated grid: three rows, so the quadratic across the boundary is
@@ -239,8 +243,10 @@ def fit_boundary_normals(
 
 
 def edge_normal(
-    n1: Float[Array, "3"], n2: Float[Array, "3"], u: Float[Array, ""]
-) -> Float[Array, "3"]:
+    n1: Float[Array | np.ndarray, "3"],
+    n2: Float[Array | np.ndarray, "3"],
+    u: Float[ArrayLike, ""],
+) -> Float[Array | np.ndarray, "3"]:
     """Eq. (10): the normal at parameter `u` of an edge, `n1 + u (n2 − n1)`, linearly
     interpolated and, as in the paper, not renormalised."""
     return n1 + u * (n2 - n1)

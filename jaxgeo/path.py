@@ -88,18 +88,19 @@ class Path(eqx.Module):
       `corridor_length` in faces; for `"laser"` the `branch_points`.
     """
 
-    points: Float[Array, "M 3"]
-    kinds: Int[Array, " M"]
-    elements: Int[Array, " M"]
-    params: Float[Array, " M"]
-    branch: Bool[Array, " M"]
-    count: Int[Array, ""]
-    length: Float[Array, ""]
-    status: Int[Array, ""]
-    stats: dict[str, Int[Array, ""]] | None = None
+    # (leading axes B in a batch of paths, `shortest_paths`' and the solver's)
+    points: Float[Array, "*B M 3"]
+    kinds: Int[Array, "*B M"]
+    elements: Int[Array, "*B M"]
+    params: Float[Array, "*B M"]
+    branch: Bool[Array, "*B M"]
+    count: Int[Array, "*B"]
+    length: Float[Array, "*B"]
+    status: Int[Array, "*B"]
+    stats: dict[str, Int[Array, "*B"]] | None = None
 
     @property
-    def ok(self) -> Bool[Array, ""]:
+    def ok(self) -> Bool[Array, "*B"]:
         return self.status == Status.SUCCESS
 
     @property

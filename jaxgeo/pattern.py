@@ -115,7 +115,8 @@ class CutMesh:
         out: list[set[int]] = [set() for _ in range(self.n_cloths)]
         for (a, b), s in zip(self.seam_edges.tolist(), self.seam_of_edge.tolist()):
             e = index.get((min(a, b), max(a, b)))
-            for c in cloths_of_edge.get(e, ()):
+            # (e is None for no edge, and .get then gives ())
+            for c in cloths_of_edge.get(e, ()):  # pyright: ignore[reportCallIssue, reportArgumentType]
                 out[c].add(int(s))
         return [sorted(c) for c in out]
 

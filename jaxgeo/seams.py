@@ -59,6 +59,7 @@ from .boundary import (
 )
 from .geodesic import shortest_path
 from .mesh import Mesh
+from .methods import Method
 from .normals import vertex_normals
 from .path import Path, Status
 from .replay import replay
@@ -246,6 +247,7 @@ def peaks_layout(
         ang = ang if side > 0 else np.pi - ang[::-1]
         for th in ang:
             hit = _ray_hit(rp, centre[:2], np.array([math.cos(th), math.sin(th)]))
+            assert hit is not None  # a ray from the ring's centre meets the ring
             sa.append(loop_parameter(mesh, loops[ring], hit))
         # outer arc beyond the valley band, through the far side of the loop
         x_cut = side * (valley_halfwidth + gap + shift * side)
@@ -327,7 +329,9 @@ def _unwrap(pts: np.ndarray, centre: np.ndarray, side: float) -> np.ndarray:
 
 
 @eqx.filter_jit
-def _trace_batch(mesh, packed, loop_a, loop_b, s_a, s_b, options, method="exact"):
+def _trace_batch(
+    mesh, packed, loop_a, loop_b, s_a, s_b, options, method: Method = "exact"
+):
     def one(la, lb, a, b):
         p1 = packed_point(mesh, packed, la, a, INSET)
         p2 = packed_point(mesh, packed, lb, b, INSET)
@@ -349,7 +353,7 @@ def trace_seams(
     mesh: Mesh,
     layout: Layout,
     options: TraceOptions | None = None,
-    method: str = "exact",
+    method: Method = "exact",
 ) -> tuple[Path, np.ndarray]:
     """Trace every seam of `layout` (one vmapped, jitted call of
     `jaxgeo.shortest_path` with `method`: the exact geodesic by default, as
@@ -480,7 +484,8 @@ def _value_and_grad(
 ):
     def f(x):
         q = _replay_batch(mesh, packed, loop_a, loop_b, x, traced)
-        widths = cloth_widths(q.points, *index, scale.shape[0]) * scale
+        # (pyright misreads *args of unknown length followed by more arguments)
+        widths = cloth_widths(q.points, *index, scale.shape[0]) * scale  # pyright: ignore[reportCallIssue]
         j, terms = objective(q.length, widths, pairs, rw, w)
         return j, (terms, widths, q.length)
 
@@ -584,6 +589,7 @@ def optimise(
     f, g, aux = ev(x)
     if not math.isfinite(f):
         raise JaxgeoError("the start layout cannot be traced")
+    assert g is not None and aux is not None  # (None only with f = inf)
     j0, w0, l0 = f, np.asarray(aux[1]), np.asarray(aux[2])
     h = np.eye(len(x)) * (max_move / max(np.abs(g).max(), 1e-12))
     history = [f]
@@ -603,6 +609,7 @@ def optimise(
             alpha *= 0.5
         if not accepted:
             break
+        assert g_new is not None and aux_new is not None  # (f_new is finite)
         s, y = x_new - x, g_new - g
         if s @ y > 1e-12:
             rho = 1.0 / (s @ y)
@@ -633,7 +640,7 @@ def cut(
     mesh: Mesh,
     layout: Layout,
     options: TraceOptions | None = None,
-    method: str = "exact",
+    method: Method = "exact",
 ):
     """Trace the seams of `layout` with `method` (exact by default) and cut
     `mesh` along them (`jaxgeo.pattern.cut_mesh`). Returns `(cut_mesh, paths)`."""
@@ -655,7 +662,7 @@ def fit_roll(
     rounds: int = 3,
     steps: int = 25,
     weights: Weights = Weights(),
-    method: str = "exact",
+    method: Method = "exact",
     log: Callable[[str], None] | None = None,
 ):
     """Optimise `layout` until every flattened cloth fits the roll.

@@ -156,7 +156,10 @@ def _build_strip(
     elements = jnp.where(
         idx == 0, start.face, jnp.where(is_end, end.face, elements)
     ).astype(jnp.int32)
-    bary = jnp.where((idx == 0)[:, None], start.bary, end.bary).astype(dtype)
+    bary = jnp.where(
+        (idx == 0)[:, None], jnp.asarray(start.bary), jnp.asarray(end.bary)
+    )
+    bary = bary.astype(dtype)
 
     width = max(mesh.vertex_faces.shape[1], 2)
 
@@ -811,11 +814,11 @@ class SmoothResult(eqx.Module):
     repair rounds that changed the strip, and the vertex contacts released."""
 
     path: SmoothPath
-    rounds: Int[Array, ""]
-    releases: Int[Array, ""]
+    rounds: Int[Array, "*B"]  # (leading axes B when batched, as under vmap)
+    releases: Int[Array, "*B"]
 
     @property
-    def ok(self) -> Bool[Array, ""]:
+    def ok(self) -> Bool[Array, "*B"]:
         """Converged on a valid strip (the pipeline's SUCCESS)."""
         return self.path.converged & self.path.valid_strip
 

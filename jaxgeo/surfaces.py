@@ -454,7 +454,8 @@ def save(name: str, path: str | os.PathLike, **params) -> str:
     args = ", ".join(f"{k}={val!r}" for k, val in params.items())
     try:
         if ext == "obj":
-            text = trimesh.exchange.obj.export_obj(
+            # (trimesh imports trimesh.exchange itself)
+            text = trimesh.exchange.obj.export_obj(  # pyright: ignore[reportAttributeAccessIssue]
                 tm,
                 include_normals=False,
                 include_color=False,

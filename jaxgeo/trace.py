@@ -442,7 +442,7 @@ def _lane(
         u = jnp.where(new_kind == VERTEX, 0.0, u)
         out_point = jnp.where(done, p2, point)
         out_kind = jnp.where(done, FACE, new_kind).astype(jnp.int32)
-        out_elem = jnp.where(done, end.face.astype(jnp.int32), new_idx)
+        out_elem = jnp.where(done, jnp.asarray(end.face).astype(jnp.int32), new_idx)
         out_param = jnp.where(done, 0.0, u)
         slot = jnp.where(append, s.count, m - 1)
 
@@ -518,7 +518,7 @@ def _lane(
         no_taut=minus1,
         pts=jnp.zeros((m, 3), dtype).at[0].set(p1),
         kinds=jnp.zeros(m, jnp.int32),  # the endpoints are FACE points
-        elems=jnp.zeros(m, jnp.int32).at[0].set(start.face.astype(jnp.int32)),
+        elems=jnp.zeros(m, jnp.int32).at[0].set(jnp.asarray(start.face, jnp.int32)),
         params=jnp.zeros(m, dtype),
         branch=jnp.zeros(m, bool),
         aims=jnp.full(m, -1, jnp.int32),
@@ -599,7 +599,9 @@ def trace_batch(
     loop runs a vmapped step until all lanes are done; a finished lane's step is a
     no-op, and a buffer write touches one slot per lane.
     """
-    initial = jnp.broadcast_to(jnp.asarray(initial_status, jnp.int32), start.face.shape)
+    initial = jnp.broadcast_to(
+        jnp.asarray(initial_status, jnp.int32), jnp.shape(start.face)
+    )
 
     frame = _frame(mesh)
 

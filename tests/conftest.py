@@ -20,3 +20,24 @@ from hypothesis import settings  # noqa: E402
 settings.register_profile("ci", max_examples=90, deadline=None, derandomize=True)
 settings.register_profile("long", max_examples=2000, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+# jaxtyping's import hook (pyproject's addopts: --jaxtyping-packages) checks every
+# call into jaxgeo against its annotations. Tests marked `mistyped` pass arguments
+# of the wrong type on purpose, to test the error a user gets; the check would
+# reject them first, so it is off during those tests.
+import jaxtyping  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _type_checks_off_if_mistyped(request):
+    if request.node.get_closest_marker("mistyped") is None:
+        yield
+        return
+    before = jaxtyping.config.jaxtyping_disable
+    jaxtyping.config.update("jaxtyping_disable", True)
+    try:
+        yield
+    finally:
+        jaxtyping.config.update("jaxtyping_disable", before)

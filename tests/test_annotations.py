@@ -46,3 +46,17 @@ def test_every_annotation_evaluates():
                 bad.append(f"{info.name}.{obj.__qualname__}: {e!r}")
     assert checked > 200  # the walk found the package's functions
     assert not bad, "\n".join(bad)
+
+
+def test_calls_are_checked_against_the_annotations():
+    """pyproject.toml's pytest addopts install jaxtyping's import hook over jaxgeo
+    (beartype as the checker): a call that breaks an annotation fails in the
+    tests, wherever it comes from."""
+    import jaxtyping
+    import numpy as np
+    import pytest
+
+    from jaxgeo.normals import edge_normal
+
+    with pytest.raises(jaxtyping.TypeCheckError, match="parameter 'n2'"):
+        edge_normal(np.zeros(3), np.zeros(2), 0.5)  # n2: Float[..., "3"]

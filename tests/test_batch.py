@@ -94,6 +94,7 @@ def test_small_batch_does_not_pay_for_the_padding(caplog):
             np.testing.assert_array_equal(have, want)
 
 
+@pytest.mark.mistyped
 def test_bad_batches_raise():
     p1, p2 = _pairs(3, 2)
     with pytest.raises(jg.JaxgeoError, match="same shape"):

@@ -110,6 +110,7 @@ A, B = V(FLAT)[vid(1, 1)], V(FLAT)[vid(5, 4)]
         (dict(method="LASER"), "unknown method"),
     ],
 )
+@pytest.mark.mistyped
 def test_bad_options_raise(kwargs, message):
     with pytest.raises(jg.JaxgeoError, match=message):
         jg.shortest_path(FLAT, A, B, **kwargs)
@@ -136,6 +137,7 @@ def test_numpy_integer_options_are_accepted():
         (np.array([0.0, 0.0, np.inf]), "NaN or infinite"),
     ],
 )
+@pytest.mark.mistyped
 def test_bad_endpoint_arrays_raise(bad, message):
     for args in ((bad, B), (A, bad)):
         with pytest.raises(jg.JaxgeoError, match=message):
@@ -149,6 +151,7 @@ def test_endpoints_as_lists_and_integers_work():
     ok(jg.shortest_path(FLAT, np.array([0, 0, 0]), B))  # int dtype, on the mesh
 
 
+@pytest.mark.mistyped
 @pytest.mark.parametrize(
     "face, bary, message",
     [
@@ -180,6 +183,7 @@ def test_bad_surface_points_raise(face, bary, message):
         (dict(throw=None), "throw must be True or False"),
     ],
 )
+@pytest.mark.mistyped
 def test_bad_batch_options_raise(kwargs, message):
     with pytest.raises(jg.JaxgeoError, match=message):
         jg.shortest_paths(FLAT, V(FLAT)[:2], V(FLAT)[2:4], **kwargs)
@@ -202,6 +206,7 @@ def test_bad_batch_arrays_raise(p1, message):
         jg.shortest_paths(FLAT, p1, p2)
 
 
+@pytest.mark.mistyped
 def test_with_vertices_bad_values_raise_at_use():
     """`Mesh.with_vertices` does not re-validate (it must take tracers); a concrete
     bad vertex array is caught when the mesh is used."""

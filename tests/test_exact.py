@@ -251,6 +251,7 @@ def test_same_face_and_identical_endpoints():
 
 
 @pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
+@pytest.mark.mistyped  # method="dijkstra", candidates="some": the errors they raise
 def test_method_objects_carry_options():
     mesh = unit_icosphere(2)
     v = np.asarray(mesh.vertices)

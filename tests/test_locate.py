@@ -124,6 +124,7 @@ def test_bad_surface_point_raises():
         )
 
 
+@pytest.mark.mistyped
 def test_mesh_argument_must_be_a_mesh():
     with pytest.raises(jg.JaxgeoError, match="jaxgeo.Mesh"):
         jg.shortest_path(np.zeros((3, 3)), np.zeros(3), np.zeros(3))

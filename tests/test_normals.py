@@ -125,6 +125,7 @@ def test_weightings_match_a_loop_on_a_random_pyramid(weighting):
     assert (np.linalg.norm(others[:, 0] - got[0], axis=1) > 1e-3).all()
 
 
+@pytest.mark.mistyped
 @pytest.mark.parametrize(
     "vertices, faces, pattern",
     [
@@ -141,6 +142,7 @@ def test_bad_arguments(vertices, faces, pattern):
         face_normals(vertices, faces)
 
 
+@pytest.mark.mistyped
 def test_unknown_weighting():
     with pytest.raises(JaxgeoError, match="unknown normal weighting 'mean'"):
         vertex_normals(CORNER_V, CORNER_F, "mean")

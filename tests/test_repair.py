@@ -162,6 +162,7 @@ def test_wall_between_touching_solids_cancels():
     assert mesh.n_faces == 6 and not (np.asarray(mesh.edge_faces)[:, 1] < 0).any()
 
 
+@pytest.mark.mistyped
 def test_bad_arguments():
     v, f = grid(1)
     with pytest.raises(JaxgeoError, match="nonmanifold must be 'split' or 'remove'"):

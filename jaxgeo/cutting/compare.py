@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import seams as sm
 from ..mesh import Mesh
+from ..methods import Method
 from ..pattern import make_pattern
 from ..trace import TraceOptions
 from .compensate import compensate_pattern
@@ -58,7 +59,7 @@ def cases() -> list[Case]:
     ]
 
 
-def measure(mesh, layout, compensation: Compensation, method: str) -> dict:
+def measure(mesh, layout, compensation: Compensation, method: Method) -> dict:
     """Stress deviation (max, RMS; kN/m) and widest cloth of `layout`'s pattern."""
     cut, _ = sm.cut(mesh, layout, TraceOptions("local", 160), method)
     pat = make_pattern(cut)
@@ -76,7 +77,9 @@ def run(
     for c in cases():
         if only and only not in c.name:
             continue
-        settings = Settings(MATERIAL, PRESTRESS, tuple(map(float, eps)), c.roll_width)
+        settings = Settings(
+            MATERIAL, PRESTRESS, (float(eps[0]), float(eps[1])), c.roll_width
+        )
         method = settings.method
         log(f"{c.name}: {c.mesh.n_faces} faces, {c.layout.n_seams} seams")
         t = time.time()

@@ -62,7 +62,8 @@ def write_dxf(
     pieces: list[Piece], path: str | os.PathLike, layout: str = "roll"
 ) -> None:
     """Write the pieces to a DXF file (layers in the module docstring)."""
-    doc = ezdxf.new(setup=True, units=6)
+    # (ezdxf's public new() is not in its __all__)
+    doc = ezdxf.new(setup=True, units=6)  # pyright: ignore[reportPrivateImportUsage]
     for name, color in LAYERS.items():
         doc.layers.add(name, color=color)
     msp = doc.modelspace()

@@ -175,8 +175,9 @@ def _outline_with_allowances(net, runs, weld, boundary) -> np.ndarray:
     grid = 1e-9 * float(np.ptp(np.asarray(net), axis=0).max())
     shape = shapely.union_all(parts, grid_size=grid)
     if shape.geom_type != "Polygon":  # keep the largest piece
-        shape = max(shape.geoms, key=lambda g: g.area)
-    ext = np.asarray(shape.exterior.coords)[:-1]
+        # (shapely types union_all's result as BaseGeometry: a Polygon or a collection)
+        shape = max(shape.geoms, key=lambda g: g.area)  # pyright: ignore[reportAttributeAccessIssue]
+    ext = np.asarray(shape.exterior.coords)[:-1]  # pyright: ignore[reportAttributeAccessIssue]
     return ext if shapely.LinearRing(ext).is_ccw else ext[::-1]
 
 
@@ -269,9 +270,11 @@ def nest_rows(
     for k in order:
         w, h = size[k]
         if x > 0 and x + w > sheet_w:
-            x, y, row_h = 0.0, y + row_h + gap, 0.0
+            # (gap is a float from its first line on)
+            x, y, row_h = 0.0, y + row_h + gap, 0.0  # pyright: ignore[reportOperatorIssue]
         out[k] = pieces[k].moved(np.array([x, y]) - lo[k])
         x += w + gap
         width_used = max(width_used, x - gap)
         row_h = max(row_h, h)
-    return out, (width_used, y + row_h)
+    # (no None is left: order is a permutation)
+    return out, (width_used, y + row_h)  # pyright: ignore[reportReturnType]

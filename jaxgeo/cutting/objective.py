@@ -43,6 +43,7 @@ from .._errors import JaxgeoError
 from ..boundary import PackedLoops, packed_point
 from ..geodesic import shortest_path
 from ..mesh import Mesh
+from ..methods import Method
 from ..path import Status
 from .compensate import CutCloth
 from .material import Material, Prestress
@@ -74,7 +75,7 @@ class Settings(eqx.Module):
     roll_width: float
     waste: float = 0.1
     fit: float = 10.0
-    method: str = eqx.field(static=True, default="laser")
+    method: Method = eqx.field(static=True, default="laser")
     max_points: int = eqx.field(static=True, default=160)
     #: linear solver of the flattening's Gauss-Newton steps and its adjoint:
     #: "sparse" (default: Newton steps on the host, each a sparse LU of the
@@ -176,6 +177,7 @@ def make_template(
     x3 = np.sum(src[idx] * w[..., None], axis=1)
     for k, cc in enumerate(cloths):
         c = cc.cloth
+        assert c.vertex_ids is not None  # (make_pattern sets it)
         n, f = len(c.vertex_ids), c.faces
         e = _edges(f)
         if n > cap.cloth_vertices or len(e) > cap.cloth_edges:

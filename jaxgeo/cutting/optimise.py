@@ -37,6 +37,7 @@ from jaxtyping import Array, Float
 
 from .._errors import JaxgeoError
 from ..mesh import Mesh
+from ..seams import Layout
 from .compensate import compensate_pattern
 from .material import Compensation
 from .objective import Settings, Template, evaluate, make_template
@@ -52,8 +53,8 @@ class StressResult:
     of the JAX objective, kN/m), `steps` (BFGS steps, line-search trials
     included) and `accepted` (steps taken)."""
 
-    start: object  # jaxgeo.seams.Layout
-    layout: object
+    start: Layout
+    layout: Layout
     j_start: float
     j_end: float
     rounds: list[dict]

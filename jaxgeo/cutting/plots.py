@@ -48,7 +48,8 @@ def deviation_figure(
         shift = p.net.min(axis=0) - c.uv[np.asarray(c.cloth.outline)].min(axis=0)
         uv = c.uv + shift
         ax2.tripcolor(uv[:, 0], uv[:, 1], c.faces, facecolors=d, cmap=cmap, norm=norm)
-        ax2.text(*p.label_at, p.name, ha="center", va="center", fontsize=7)
+        # (pyright misreads *args of unknown length followed by more arguments)
+        ax2.text(*p.label_at, p.name, ha="center", va="center", fontsize=7)  # pyright: ignore[reportCallIssue]
     ax2.set_aspect("equal")
     ax2.set_title("on the cut cloths (warp along x)")
     fig.colorbar(

@@ -29,6 +29,7 @@ which `scipy.integrate.quad` integrates to near machine precision.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import cache
 from typing import NamedTuple
 
@@ -38,6 +39,10 @@ import scipy.optimize
 from jaxtyping import ArrayLike, Float
 
 from .._errors import JaxgeoError
+
+#: A point as these functions take it: an array, or a list or tuple of floats
+#: (jaxtyping's `ArrayLike`, JAX's, has no lists or tuples).
+_Point = ArrayLike | Sequence[float]
 
 # substitutions above, so quad reaches it and lengths are good to ~1e-13 relative.
 _QUAD_RTOL = 1e-13
@@ -50,10 +55,10 @@ _E_MIN = 1e-200
 
 
 def great_circle_length(
-    p: Float[ArrayLike, "*batch 3"],
-    q: Float[ArrayLike, "*batch 3"],
+    p: Float[ArrayLike, "*#batch 3"],
+    q: Float[ArrayLike, "*#batch 3"],
     radius: float = 1.0,
-) -> Float[np.ndarray, " *batch"]:
+) -> Float[np.ndarray, " *#batch"] | float:
     """Great-circle distance radius·∠(p, q) = radius·atan2(|p × q|, p·q).
 
     The atan2 form is accurate for nearly equal and nearly antipodal points (arccos
@@ -79,7 +84,7 @@ def default_c() -> float:
     return catenoid_parameter(1.0, 1.0)
 
 
-def _theta_z(p: ArrayLike) -> tuple[float, float]:
+def _theta_z(p: _Point) -> tuple[float, float]:
     """A point given as 3-D (x, y, z) or as surface coordinates (θ, z)."""
     p = np.asarray(p, dtype=np.float64).ravel()
     if p.shape == (3,):
@@ -265,7 +270,7 @@ def _geodesics_with_travel(alpha: float, w1: float, w2: float, c: float):
 
 
 def catenoid_geodesics(
-    p: ArrayLike, q: ArrayLike, c: float | None = None
+    p: _Point, q: _Point, c: float | None = None
 ) -> list[CatenoidGeodesic]:
     """All geodesics from p to q on the catenoid r(z) = c·cosh(z/c) that sweep at
     most one turn in θ, in both directions, sorted by length (shortest first).
@@ -291,9 +296,7 @@ def catenoid_geodesics(
     return sorted(result, key=lambda g: g.length)
 
 
-def catenoid_geodesic_length(
-    p: ArrayLike, q: ArrayLike, c: float | None = None
-) -> float:
+def catenoid_geodesic_length(p: _Point, q: _Point, c: float | None = None) -> float:
     """Length of the shortest geodesic from p to q on the catenoid r(z) = c·cosh(z/c).
 
     p, q as (x, y, z) or (θ, z); c defaults to the catenoid spanning rings of radius 1
@@ -306,8 +309,8 @@ def catenoid_geodesic_length(
 
 
 def _catenoid_geodesic_length_shooting(
-    p: ArrayLike,
-    q: ArrayLike,
+    p: _Point,
+    q: _Point,
     c: float | None = None,
     travel: float | None = None,
     guess: tuple[float, float] | None = None,
@@ -399,7 +402,7 @@ def great_circle_points(
 
 
 def catenoid_geodesic_points(
-    p: ArrayLike, q: ArrayLike, n: int = 100, c: float | None = None
+    p: _Point, q: _Point, n: int = 100, c: float | None = None
 ) -> Float[np.ndarray, "n 3"]:
     """`n` points, equally spaced in arc length, of the shortest catenoid geodesic
     from p to q (given as (x, y, z) or (θ, z)).
@@ -442,7 +445,7 @@ def catenoid_geodesic_points(
 
 
 def catenoid_descent_curve(
-    p: ArrayLike, q: ArrayLike, n: int = 100, c: float | None = None
+    p: _Point, q: _Point, n: int = 100, c: float | None = None
 ) -> tuple[float, Float[np.ndarray, "n 3"]]:
     """The continuous limit of the sliding laser ray on the catenoid: the curve of
     steepest descent of the Euclidean distance to q, from p.

@@ -11,6 +11,7 @@ import os
 import sys
 import time
 import typing
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -136,9 +137,10 @@ class Table:
         """Write `columns()` as CSV (full precision)."""
         cols = self.columns()
         if not hasattr(file, "write"):
-            with open(file, "w", newline="") as f:
+            # (hasattr(file, 'write') told a path from a text file)
+            with open(file, "w", newline="") as f:  # pyright: ignore[reportCallIssue, reportArgumentType]
                 return self.to_csv(f)
-        w = csv.writer(file)
+        w = csv.writer(file)  # pyright: ignore[reportArgumentType]
         w.writerow(cols)
         for row in zip(*cols.values()):
             w.writerow([repr(x) if isinstance(x, float) else x for x in row])
@@ -237,9 +239,9 @@ def _groups(rows: list[Row]) -> dict[tuple[str, int], list[Row]]:
 
 def run_suite(
     suite: Suite,
-    methods: typing.Sequence[str] | None = None,
+    methods: Sequence[str] | None = None,
     exact_solver: str = "auto",
-    progress: typing.Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | None = None,
     **solver_options: typing.Any,
 ) -> Table:
     """Solve every pair of `suite` with every method and the exact polyhedral solver.
@@ -291,15 +293,26 @@ def run_suite(
         say(f"{tag} {m}: compiling ({mesh.n_faces} faces)")
         t0 = time.perf_counter()
         first = suite.pairs[0]
+        # (m: a method's name as given; shortest_path rejects an unknown one)
         path = shortest_path(
-            mesh, v[first.v1], v[first.v2], method=m, throw=False, **solver_options
+            mesh,
+            v[first.v1],
+            v[first.v2],
+            method=m,  # pyright: ignore[reportArgumentType]
+            throw=False,
+            **solver_options,
         )
         float(path.length)
         table.compile_time[(suite.name, suite.resolution, m)] = time.perf_counter() - t0
         for k, (p, row) in enumerate(zip(suite.pairs, rows)):
             t0 = time.perf_counter()
             path = shortest_path(
-                mesh, v[p.v1], v[p.v2], method=m, throw=False, **solver_options
+                mesh,
+                v[p.v1],
+                v[p.v2],
+                method=m,  # pyright: ignore[reportArgumentType]
+                throw=False,
+                **solver_options,
             )
             length = float(path.length)
             dt = time.perf_counter() - t0
@@ -321,11 +334,11 @@ def _merge(tables: list[Table]) -> Table:
 
 
 def validate(
-    resolutions: int | typing.Sequence[int] = 4,
-    suites: typing.Sequence[str] = ("sphere", "catenoid"),
-    methods: typing.Sequence[str] | None = None,
+    resolutions: int | Sequence[int] = 4,
+    suites: Sequence[str] = ("sphere", "catenoid"),
+    methods: Sequence[str] | None = None,
     exact_solver: str = "auto",
-    progress: typing.Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | None = None,
     **solver_options: typing.Any,
 ) -> Table:
     """Run the named suites (`SUITES`) at one or several resolutions; see
@@ -375,7 +388,7 @@ def _median_abs(xs: list[float]) -> float:
 
 
 def summary_markdown(
-    summary: list[dict[str, typing.Any]], methods: typing.Sequence[str]
+    summary: list[dict[str, typing.Any]], methods: Sequence[str]
 ) -> str:
     """`convergence_summary` as a Markdown table (median |error| in per cent)."""
     head = ["suite", "resolution", "faces", "mean edge", "exact polyhedral"]
@@ -408,7 +421,7 @@ def _loglog(ax, entries: list[dict[str, typing.Any]], key: str, **kw) -> None:
 
 def plot_convergence(
     summary: list[dict[str, typing.Any]],
-    methods: typing.Sequence[str],
+    methods: Sequence[str],
     file=None,
     axes=None,
 ):
