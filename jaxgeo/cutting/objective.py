@@ -293,7 +293,8 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="sparse"):
         return _implicit(u, L, sw, edges, vmask, uv0), ok
 
     def residuals(u, args):
-        return _residuals(u, *args, edges, vmask, uv0)
+        L, sw = args
+        return _residuals(u, L, sw, edges, vmask, uv0)
 
     sol = optx.least_squares(
         residuals,
