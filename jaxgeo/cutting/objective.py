@@ -506,7 +506,7 @@ def _implicit_jvp(primals, tangents):
 
 
 def evaluate(
-    x: Float[Array, " 2N"], mesh: Mesh, template: Template, settings: Settings
+    x: Float[Array, " P"], mesh: Mesh, template: Template, settings: Settings
 ) -> tuple[Float[Array, ""], dict]:
     """`J(x)` (module docstring) and its parts: `rms`, `max` (stress deviation,
     kN/m), `waste`, `fit`, `widths` `(C,)`, `valid` (the template still holds
