@@ -35,14 +35,14 @@ class UsageError(Exception):
 def _default(name: str):
     """The library's default for `shortest_path`'s keyword `name`, so that the
     command line follows the API."""
-    from .geodesic import shortest_path
+    from ..geodesic import shortest_path
 
     return inspect.signature(shortest_path).parameters[name].default
 
 
 def _load(mesh_arg: str | None):
-    from . import surfaces
-    from .mesh import Mesh, load_mesh
+    from .. import surfaces
+    from ..mesh import Mesh, load_mesh
 
     if mesh_arg is None:
         return Mesh(*surfaces.catenoid()), f"built-in {EXAMPLE}"
@@ -57,7 +57,7 @@ def _endpoint(mesh, point, vertex, default, option: str):
     """(endpoint for the API, text for the summary) from --from/--to or
     --from-vertex/--to-vertex (an integer: the API reads it as a vertex index)."""
     if vertex is not None:
-        from ._checks import check_point
+        from .._checks import check_point
 
         check_point(option, vertex, mesh)  # JaxgeoError naming the option
         return vertex, f"vertex {vertex} {_fmt(np.asarray(mesh.vertices[vertex]))}"
@@ -77,7 +77,7 @@ def _format_of(output: str | None, given: str | None) -> str | None:
 
 
 def _write(path: str, text: str) -> None:
-    from ._errors import JaxgeoError
+    from .._errors import JaxgeoError
 
     try:
         with open(path, "w") as f:
@@ -87,8 +87,8 @@ def _write(path: str, text: str) -> None:
 
 
 def _cmd_path(args: argparse.Namespace) -> int:
-    from .geodesic import shortest_path
-    from .io import format_path
+    from ..geodesic import shortest_path
+    from ..io import format_path
 
     if args.mesh is not None and not (
         (args.from_ is not None or args.from_vertex is not None)
@@ -165,7 +165,7 @@ def read_pairs(path: str, mesh) -> tuple[np.ndarray, np.ndarray]:
     """Endpoint pairs from a CSV file, `(p1, p2)` for `shortest_paths`: rows
     x1,y1,z1,x2,y2,z2 give two `(N, 3)` arrays, rows i,j (vertex indices) two
     integer `(N,)` arrays. A header row and `#` comments are allowed."""
-    from ._errors import JaxgeoError
+    from .._errors import JaxgeoError
 
     try:
         pairs = np.loadtxt(
@@ -198,8 +198,8 @@ def read_pairs(path: str, mesh) -> tuple[np.ndarray, np.ndarray]:
 def _points_text(paths, ok: np.ndarray, fmt: str) -> str:
     """The points of a batch: `json` (one object per row), `obj` (one polyline
     per row) or `csv` (long format: row,index,x,y,z). Failed rows are empty."""
-    from .io import path_to_dict
-    from .path import Status
+    from ..io import path_to_dict
+    from ..path import Status
 
     rows = list(paths)
     if fmt == "json":
@@ -244,8 +244,8 @@ def _points_text(paths, ok: np.ndarray, fmt: str) -> str:
 
 
 def _cmd_paths(args: argparse.Namespace) -> int:
-    from .batch import shortest_paths
-    from .path import Status
+    from ..batch import shortest_paths
+    from ..path import Status
 
     points_fmt = None
     if args.points:
@@ -313,8 +313,8 @@ def _parameter(text: str) -> tuple[str, object]:
 
 
 def _cmd_surface(args: argparse.Namespace) -> int:
-    from . import surfaces
-    from .mesh import load_mesh
+    from .. import surfaces
+    from ..mesh import load_mesh
 
     params = dict(args.params)
     out = args.output or f"{args.name}.obj"
@@ -347,7 +347,7 @@ def _names(text: str) -> list[str]:
 def _cmd_validate(args: argparse.Namespace) -> int:
     import time
 
-    from . import validation
+    from .. import validation
 
     def progress(line: str) -> None:
         if not args.quiet:
@@ -386,7 +386,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _add_solver_options(parser: argparse.ArgumentParser) -> None:
-    from .geodesic import METHODS
+    from ..geodesic import METHODS
 
     method = _default("method")
     parser.add_argument(
@@ -426,7 +426,7 @@ def _add_solver_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .surfaces import SURFACES
+    from ..surfaces import SURFACES
 
     parser = argparse.ArgumentParser(
         prog="jaxgeo",
@@ -606,7 +606,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     v.set_defaults(func=_cmd_validate, parser=v)
 
-    from ._pattern_cli import add_pattern_parser
+    from .pattern import add_pattern_parser
 
     add_pattern_parser(sub)
     return parser
@@ -615,8 +615,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     import jax
 
-    from ._cache import enable_compilation_cache
-    from ._errors import JaxgeoError
+    from .._cache import enable_compilation_cache
+    from .._errors import JaxgeoError
 
     jax.config.update("jax_enable_x64", True)
     # Compiled solvers are cached on disk: the second run of a command skips the
@@ -634,7 +634,3 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as e:  # argparse: --help (0) and usage errors (2)
         return e.code if isinstance(e.code, int) else 2
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
