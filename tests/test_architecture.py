@@ -95,6 +95,11 @@ LAYERS: dict[str, tuple[set[str], set[str]]] = {
         {
             "cli",
             "cli.__main__",
+            "cli.common",
+            "cli.path",
+            "cli.paths",
+            "cli.surface",
+            "cli.validate",
             "cli.pattern",
             "",
         },
