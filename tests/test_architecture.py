@@ -90,8 +90,21 @@ LAYERS: dict[str, tuple[set[str], set[str]]] = {
         },
         {"batch"},
     ),
-    # front ends
-    "front": ({"cli", "_pattern_cli", ""}, {"applications"}),
+    # front ends: the `jaxgeo` command (one module per subcommand) and the package
+    "front": (
+        {
+            "cli",
+            "cli.__main__",
+            "cli.common",
+            "cli.path",
+            "cli.paths",
+            "cli.surface",
+            "cli.validate",
+            "cli.pattern",
+            "",
+        },
+        {"applications"},
+    ),
 }
 
 # ---------------------------------------------------------------- the to-do lists

@@ -6,7 +6,7 @@ import pytest
 
 import jaxgeo as jg
 from jaxgeo import seams, surfaces
-from jaxgeo._pattern_cli import main as pattern_main
+from jaxgeo.cli.pattern import main as pattern_main
 from jaxgeo.export import offset_polygon, write_dxf, write_seams_obj, write_svg
 from jaxgeo.pattern import make_pattern, strip_width
 
@@ -191,7 +191,7 @@ def test_cli_pattern_bad_material_exits_2(tmp_path):
 def test_cli_method_defaults_to_exact():
     import argparse
 
-    from jaxgeo._pattern_cli import add_pattern_parser
+    from jaxgeo.cli.pattern import add_pattern_parser
 
     parser = argparse.ArgumentParser()
     add_pattern_parser(parser.add_subparsers(dest="command"))

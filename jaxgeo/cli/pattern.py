@@ -130,9 +130,9 @@ def _usage(msg: str) -> int:
 def run_pattern(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from . import seams as sm
-    from ._errors import JaxgeoError
-    from .cutting import (
+    from .. import seams as sm
+    from .._errors import JaxgeoError
+    from ..cutting import (
         Compensation,
         Material,
         Prestress,
@@ -141,11 +141,11 @@ def run_pattern(args: argparse.Namespace) -> int:
         optimise_seams,
         reassemble,
     )
-    from .cutting.export import write_dxf, write_svg
-    from .cutting.fabricate import make_pieces, weld_mismatch
-    from .cutting.plots import deviation_figure
-    from .export import write_seams_obj
-    from .mesh import load_mesh
+    from ..cutting.export import write_dxf, write_svg
+    from ..cutting.fabricate import make_pieces, weld_mismatch
+    from ..cutting.plots import deviation_figure
+    from ..export import write_seams_obj
+    from ..mesh import load_mesh
 
     if args.seams < 1 or args.rounds < 1 or not args.roll_width > 0:
         return _usage("--seams and --rounds must be >= 1 and --roll-width > 0")
@@ -198,7 +198,7 @@ def run_pattern(args: argparse.Namespace) -> int:
         j_end = history[-1][0] if history else j_start
         cut, paths = sm.cut(mesh, layout, method=args.method)
     else:
-        from .pattern import make_pattern
+        from ..pattern import make_pattern
 
         settings = Settings(
             material,
