@@ -222,7 +222,7 @@ def test_converges_when_the_path_grazes_vertices():
 @pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_phong_normals_boundary_option():
     """`boundary="keep"` is the weighting itself; `"fit"` (default) changes the
-    boundary vertices only; anything else is an error."""
+    boundary vertices only."""
     v, f = validation.catenoid_mesh(2)
     mesh = Mesh(v, f)
     fan = np.asarray(vertex_normals(mesh.vertices, mesh.faces))
@@ -234,8 +234,13 @@ def test_phong_normals_boundary_option():
     np.testing.assert_allclose(fit[~ring], fan[~ring], atol=1e-15)
     # an array is refitted at the boundary too, unless kept
     np.testing.assert_allclose(phong_normals(mesh, jnp.asarray(fan)), fit, atol=1e-15)
+
+
+@pytest.mark.mistyped  # "mirror" is no `boundary` option: the error is the test
+def test_phong_normals_rejects_an_unknown_boundary_option():
+    v, f = validation.catenoid_mesh(2)
     with pytest.raises(JaxgeoError, match="boundary must be"):
-        phong_normals(mesh, "uniform", "mirror")
+        phong_normals(Mesh(v, f), "uniform", "mirror")
 
 
 # --------------------------------------------------------------------------- gradients
