@@ -32,8 +32,10 @@ class SurfacePoint(eqx.Module):
     face: Int[ArrayLike, "*B"]
     bary: Float[ArrayLike, "*B 3"] | Sequence[float]
 
-    def position(self, mesh: Mesh) -> Float[Array, "3"]:
-        return jnp.asarray(self.bary) @ mesh.vertices[mesh.faces[self.face]]
+    def position(self, mesh: Mesh) -> Float[Array, "*B 3"]:
+        """The 3-D point (one per point of a batch)."""
+        corners = mesh.vertices[mesh.faces[jnp.asarray(self.face)]]
+        return jnp.einsum("...i,...ij->...j", jnp.asarray(self.bary), corners)
 
     @classmethod
     def vertex(cls, mesh: Mesh, i: Int[ArrayLike, ""]) -> SurfacePoint:

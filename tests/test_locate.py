@@ -75,6 +75,19 @@ def test_path_from_a_vertex_to_an_edge_point():
     path = jg.shortest_path(MESH, a, b)
     assert int(path.status) == jg.Status.SUCCESS
     np.testing.assert_allclose(path.polyline()[[0, -1]], [a, b], atol=1e-12)
+    # the path carries its endpoints: where it starts and ends, in its end faces
+    assert path.start is not None and path.end is not None
+    ends = [path.start.position(MESH), path.end.position(MESH)]
+    np.testing.assert_allclose(ends, path.polyline()[[0, -1]], atol=1e-12)
+    elements = np.asarray(path.elements)[[0, int(path.count) - 1]]
+    assert [int(path.start.face), int(path.end.face)] == elements.tolist()
+    for sp in (path.start, path.end):
+        bary = np.asarray(sp.bary)
+        assert bary.shape == (3,) and (bary >= -1e-12).all()
+        assert abs(bary.sum() - 1) <= 1e-12
+    # a: a corner of its face; b: on a side (one coordinate 0, two ½)
+    np.testing.assert_allclose(np.sort(path.start.bary), [0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(np.sort(path.end.bary), [0, 0.5, 0.5], atol=1e-12)
 
 
 def test_far_point_raises_and_names_the_distance():
