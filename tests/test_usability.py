@@ -40,7 +40,7 @@ def test_batch_rows_are_paths(batch):
     assert paths.start is not None and paths.end is not None
     assert paths.start.face.shape == (3,) and paths.end.bary.shape == (3, 3)
     np.testing.assert_allclose(np.sum(paths.start.bary, axis=1), 1.0, rtol=1e-12)
-    for i, row in enumerate(rows):
+    for row in rows:
         assert row.start is not None and row.end is not None
         line = row.polyline()
         np.testing.assert_allclose(row.start.position(mesh), line[0], atol=1e-12)
