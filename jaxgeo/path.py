@@ -89,9 +89,8 @@ class Path(eqx.Module):
       `corridor_length` in faces; for `"laser"` the `branch_points`; for
       `"smooth"` the exact method's, and of the smooth solve the strip
       `repair_rounds` and `releases`, whether the Newton solve `converged`, its
-      final projected `grad_norm` and its `newton_iterations` (a row whose exact
-      path failed reports the smooth solve's values of a stand-in; its status
-      says it failed).
+      final projected `grad_norm` and its `newton_iterations` (meaningless in a
+      row whose exact path failed: its status says so).
     - `start`, `end`: the two endpoints as `SurfacePoint`s (face and barycentric
       coordinates; leading axes B in a batch), as located from what was given:
       `start.position(mesh)` is `points[0]` and `end.position(mesh)` is
