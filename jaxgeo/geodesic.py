@@ -187,7 +187,8 @@ def shortest_path(
       is NaN.
 
     **Returns:** a `Path`; its points and length are differentiable with respect to
-    `mesh.vertices` and the endpoints.
+    `mesh.vertices` and the endpoints. `path.start` and `path.end` are the
+    endpoints as `SurfacePoint`s (a 3-D point as located on the mesh).
     """
     m, max_points = checked_method(
         mesh, method, candidates, max_points, normals, max_distance, throw
