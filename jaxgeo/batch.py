@@ -165,7 +165,8 @@ def shortest_paths(
       NaN `length`.
     - `progress`: called as `progress(done, total)` after each chunk.
 
-    **Returns:** a `Path` whose arrays have a leading batch axis of length N.
+    **Returns:** a `Path` whose arrays (its endpoints `start` and `end` too)
+    have a leading batch axis of length N.
     """
     m, max_points = checked_method(
         mesh, method, candidates, max_points, normals, max_distance, throw

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Literal
 
@@ -69,11 +70,13 @@ def solve(
     differentiable: bool,
 ) -> Path:
     """The one pipeline: located endpoint pairs (leading batch axis B) → the
-    method → `Path` (batched). `shortest_path`, `shortest_paths` and the cutting
-    code all come through here."""
+    method → `Path` (batched), which carries `start` and `end` (the endpoints
+    as given here). `shortest_path`, `shortest_paths` and the cutting code all
+    come through here."""
     # a NaN distance marks an endpoint that is no point of the mesh (see
     # `as_surface_point`); the method still runs on a valid stand-in (face 0)
     invalid = jnp.isnan(d1) | jnp.isnan(d2)
+    given = (start, end)
     start = _stand_in(start, jnp.isnan(d1))
     end = _stand_in(end, jnp.isnan(d2))
     d1, d2 = jnp.nan_to_num(d1), jnp.nan_to_num(d2)
@@ -86,9 +89,20 @@ def solve(
     # minimise. `where` passes a zero cotangent to the failed length, so its
     # gradient is zero and `jnp.where(path.ok, path.length, 0.0)` masks it.
     failed = path.status != Status.SUCCESS
-    return eqx.tree_at(
-        lambda p: p.length, path, jnp.where(failed, jnp.nan, path.length)
+    # Every method's result carries its endpoints, set here once: as located,
+    # not the stand-ins of invalid rows (the row's status says it failed).
+    return dataclasses.replace(
+        path,
+        length=jnp.where(failed, jnp.nan, path.length),
+        start=_as_arrays(given[0]),
+        end=_as_arrays(given[1]),
     )
+
+
+def _as_arrays(sp: SurfacePoint) -> SurfacePoint:
+    """`sp` with its face and barycentric coordinates as arrays (a `Path`'s
+    endpoints are pytree leaves of fixed type, whatever the caller passed)."""
+    return SurfacePoint(jnp.asarray(sp.face, jnp.int32), jnp.asarray(sp.bary))
 
 
 def _stand_in(sp: SurfacePoint, bad) -> SurfacePoint:
@@ -173,7 +187,8 @@ def shortest_path(
       is NaN.
 
     **Returns:** a `Path`; its points and length are differentiable with respect to
-    `mesh.vertices` and the endpoints.
+    `mesh.vertices` and the endpoints. `path.start` and `path.end` are the
+    endpoints as `SurfacePoint`s (a 3-D point as located on the mesh).
     """
     m, max_points = checked_method(
         mesh, method, candidates, max_points, normals, max_distance, throw

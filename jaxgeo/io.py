@@ -13,8 +13,20 @@ FORMATS = ("json", "csv", "obj")
 
 
 def path_to_dict(path: Path) -> dict:
-    """A JSON-ready description of a path (the live part of its buffers)."""
+    """A JSON-ready description of a path (the live part of its buffers), with
+    its endpoints (`start`, `end`: face and barycentric coordinates) and the
+    method's `stats` when it has them (a NaN, as a failed row may hold, is
+    written as null)."""
     n = int(path.count)
+    extra: dict = {}
+    for name, sp in (("start", path.start), ("end", path.end)):
+        if sp is not None:
+            bary = np.asarray(sp.bary, float).tolist()
+            extra[name] = {"face": int(np.asarray(sp.face)), "bary": _finite(bary)}
+    if path.stats:
+        extra["stats"] = {
+            k: _finite(np.asarray(v).item()) for k, v in path.stats.items()
+        }
     return {
         "status": Status(int(path.status)).name.lower(),
         "length": float(path.length),
@@ -24,7 +36,18 @@ def path_to_dict(path: Path) -> dict:
         "kinds": np.asarray(path.kinds)[:n].tolist(),
         "elements": np.asarray(path.elements)[:n].tolist(),
         "params": np.asarray(path.params)[:n].tolist(),
+        **extra,
     }
+
+
+def _finite(x):
+    """`x` (a number or a list of them) with NaN and ±inf as None (JSON's
+    null: `json.dumps` would write NaN, which JSON does not have)."""
+    if isinstance(x, list):
+        return [_finite(v) for v in x]
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
+    return x
 
 
 def format_path(path: Path, fmt: str) -> str:

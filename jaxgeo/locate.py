@@ -23,8 +23,11 @@ class SurfacePoint(eqx.Module):
     """A point of the mesh: a face and barycentric coordinates in it.
 
     `bary[i]` weighs corner `i` of the face. A point on an edge has one zero
-    coordinate (`bary[i] = 0` ⇒ edge `mesh.face_edges[face, i]`), a vertex two.
-    Differentiable in `bary` (e.g. to slide an endpoint along a boundary edge).
+    coordinate (`bary[i] = 0` ⇒ edge `mesh.face_edges[face, i]`), a vertex two:
+    `SurfacePoint.vertex(mesh, i)` and `SurfacePoint.on_edge(mesh, e, t)` make
+    them, and `snap` tells which element a point lies on. Differentiable in
+    `bary` (e.g. to slide an endpoint along a boundary edge). A `Path` keeps its
+    endpoints as these (`Path.start`, `Path.end`).
     """
 
     # (any array-like, as given; batched alike, with leading axes B: in a batch of
@@ -32,8 +35,10 @@ class SurfacePoint(eqx.Module):
     face: Int[ArrayLike, "*B"]
     bary: Float[ArrayLike, "*B 3"] | Sequence[float]
 
-    def position(self, mesh: Mesh) -> Float[Array, "3"]:
-        return jnp.asarray(self.bary) @ mesh.vertices[mesh.faces[self.face]]
+    def position(self, mesh: Mesh) -> Float[Array, "*B 3"]:
+        """The 3-D point (one per point of a batch)."""
+        corners = mesh.vertices[mesh.faces[jnp.asarray(self.face)]]
+        return jnp.einsum("...i,...ij->...j", jnp.asarray(self.bary), corners)
 
     @classmethod
     def vertex(cls, mesh: Mesh, i: Int[ArrayLike, ""]) -> SurfacePoint:
@@ -48,6 +53,27 @@ class SurfacePoint(eqx.Module):
         face = jnp.where(ok, mesh.vertex_faces[jnp.where(ok, i, 0), 0], 0)
         corner = jnp.argmax(mesh.faces[face] == i)
         bary = jax.nn.one_hot(corner, 3, dtype=mesh.vertices.dtype)
+        return cls(face.astype(jnp.int32), jnp.where(ok, bary, jnp.nan))
+
+    @classmethod
+    def on_edge(
+        cls, mesh: Mesh, e: Int[ArrayLike, ""], t: Float[ArrayLike, ""]
+    ) -> SurfacePoint:
+        """The point `(1 − t)·V[edges[e, 0]] + t·V[edges[e, 1]]` of edge `e`
+        (`t` as `Path.params` of an edge crossing), as a point of the first face
+        beside the edge: barycentric coordinates `1 − t` and `t` at the edge's
+        corners, zero at the third. Works on a traced `e`; differentiable in
+        `t`. An edge index out of range (or of a padded edge, which no face
+        holds) gives face 0 with NaN coordinates, as `vertex` does."""
+        e = jnp.asarray(e)
+        inside = (e >= 0) & (e < mesh.edges.shape[0])
+        face = mesh.edge_faces[jnp.where(inside, e, 0), 0]
+        ok = inside & (face >= 0)
+        face = jnp.where(ok, face, 0)
+        a, b = mesh.edges[jnp.where(ok, e, 0), 0], mesh.edges[jnp.where(ok, e, 0), 1]
+        corners = mesh.faces[face]
+        t = jnp.asarray(t, mesh.vertices.dtype)
+        bary = (1 - t) * (corners == a) + t * (corners == b)
         return cls(face.astype(jnp.int32), jnp.where(ok, bary, jnp.nan))
 
 

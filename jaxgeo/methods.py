@@ -106,7 +106,8 @@ class Smooth(eqx.Module):
     """The geodesic of the smooth surface the Phong normals define (Phong
     tessellation, α = ½; `jaxgeo.smooth`), started from the exact path's strip and
     repaired at vertex contacts, all in JAX. `normals`: vertex-normal weighting;
-    `max_rounds`: strip repair rounds."""
+    `max_rounds`: strip repair rounds. The result's `stats` hold the exact
+    method's and the smooth solve's (`Path.stats`)."""
 
     normals: Weighting = "uniform"
     max_rounds: int = 8
@@ -132,7 +133,16 @@ class Smooth(eqx.Module):
             g = good.reshape(good.shape + (1,) * (a.ndim - 1))
             return jnp.where(g, a, b)
 
-        stats = dict(ex.stats or {}, repair_rounds=r.rounds, releases=r.releases)
+        # the smooth solve's own diagnostics beside the exact method's (whose
+        # `iterations` are flip rounds: the Newton iterations get their own key)
+        stats = dict(
+            ex.stats or {},
+            repair_rounds=r.rounds,
+            releases=r.releases,
+            converged=sp.converged,
+            grad_norm=sp.grad_norm,
+            newton_iterations=sp.iterations,
+        )
         return Path(
             points=pick(sp.points, ex.points),
             kinds=pick(sp.kinds, ex.kinds),

@@ -9,10 +9,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float, Int, Shaped
 
 from ._errors import JaxgeoError
 from ._numerics import safe_norm
+from .locate import SurfacePoint
 
 
 class Status(enum.IntEnum):
@@ -70,9 +71,9 @@ class Path(eqx.Module):
 
     - `points`: `(M, 3)` 3-D points; entries past `count` repeat the last point,
       so `points` can be plotted or summed over without masking.
-    - `kinds`: `(M,)` 0 = an endpoint (given by its face and barycentric
-      coordinates, wherever it lies in the face's closure), 1 = a crossing of an
-      edge, 2 = a mesh vertex.
+    - `kinds`: `(M,)` 0 = an endpoint (its face in `elements`, its barycentric
+      coordinates in `start` / `end`, wherever it lies in the face's closure),
+      1 = a crossing of an edge, 2 = a mesh vertex.
     - `elements`: `(M,)` the face, edge or vertex index of each point.
     - `params`: `(M,)` for edge crossings, the parameter `u` on the edge
       (point = (1 − u)·V[edges[e, 0]] + u·V[edges[e, 1]]); 0 otherwise.
@@ -82,10 +83,24 @@ class Path(eqx.Module):
       could minimise; its gradient there is zero); `status`, a `Status` code as
       an integer array (`Status(int(path.status))`, or `outcome` /
       `outcomes`, reads it).
-    - `stats`: the method's diagnostics, a dict of integer arrays (as optimistix's
+    - `stats`: the method's diagnostics, a dict of arrays (as optimistix's
       `Solution.stats`): for `"exact"` the flip rounds (`iterations`) and `flips`
       of the winning start, `starts` refined and `starts_converged`, and the final
-      `corridor_length` in faces; for `"laser"` the `branch_points`.
+      `corridor_length` in faces; for `"laser"` the `branch_points`; for
+      `"smooth"` the exact method's, and of the smooth solve the strip
+      `repair_rounds` and `releases`, whether the Newton solve `converged`, its
+      final projected `grad_norm` and its `newton_iterations` (meaningless in a
+      row whose exact path failed: its status says so).
+    - `start`, `end`: the two endpoints as `SurfacePoint`s (face and barycentric
+      coordinates; leading axes B in a batch), as located from what was given:
+      `start.position(mesh)` is `points[0]` and `end.position(mesh)` is
+      `points[count - 1]` (the smooth method's end nodes are these points
+      lifted onto the Phong surface, which meets the mesh at its vertices
+      only). Differentiable as the endpoints were (a 3-D
+      endpoint through `locate`). A row that failed `INVALID_ENDPOINT` keeps
+      what was given (it may name no face of the mesh). `None` only on a `Path`
+      built by hand or by a method's internals; every result of
+      `shortest_path`, `shortest_paths` and `solve` has them.
     """
 
     # (leading axes B in a batch of paths, `shortest_paths`' and the solver's)
@@ -97,7 +112,9 @@ class Path(eqx.Module):
     count: Int[Array, "*B"]
     length: Float[Array, "*B"]
     status: Int[Array, "*B"]
-    stats: dict[str, Int[Array, "*B"]] | None = None
+    stats: dict[str, Shaped[Array, "*B"]] | None = None
+    start: SurfacePoint | None = None
+    end: SurfacePoint | None = None
 
     @property
     def ok(self) -> Bool[Array, "*B"]:

@@ -20,6 +20,7 @@ All of this is numpy/scipy: it runs once per layout, after the optimisation.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.optimize
@@ -29,6 +30,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull
 
 from ._errors import JaxgeoError
+from .locate import SurfacePoint
 from .mesh import Mesh
 from .path import EDGE, FACE, VERTEX, Path
 
@@ -121,9 +123,11 @@ class CutMesh:
         return [sorted(c) for c in out]
 
 
-def _locations(mesh_np, path: Path, end_bary: np.ndarray) -> list[tuple]:
+def _locations(
+    mesh_np, path: Path, ends: tuple[SurfacePoint, SurfacePoint]
+) -> list[tuple]:
     """A seam as a list of (location, path index): ('v', vertex) or
-    ('e', edge, u) locations; endpoints are
+    ('e', edge, u) locations; the endpoints `ends` are
     snapped onto the nearest side of their face (seam ends lie on the boundary,
     possibly inset by a hair for the laser ray)."""
     faces, edges, face_edges = mesh_np
@@ -139,7 +143,9 @@ def _locations(mesh_np, path: Path, end_bary: np.ndarray) -> list[tuple]:
         elif k == EDGE:
             loc = ("e", el, float(params[j]))
         elif k == FACE:
-            bary = np.asarray(end_bary[0 if j == 0 else 1], float)
+            end = ends[0 if j == 0 else 1]
+            el = int(np.asarray(end.face))
+            bary = np.asarray(end.bary, float)
             c = int(np.argmin(bary))
             e = int(face_edges[el, c])
             a = faces[el, (c + 1) % 3]
@@ -159,17 +165,27 @@ def _locations(mesh_np, path: Path, end_bary: np.ndarray) -> list[tuple]:
     return out
 
 
-def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> CutMesh:
+#: A seam as `cut_mesh` used to take it: `(path, bary_start, bary_end)`.
+LegacySeam = tuple[Path, Float[np.ndarray, " 3"], Float[np.ndarray, " 3"]]
+
+
+def cut_mesh(mesh: Mesh, seams: Path | Sequence[Path | LegacySeam]) -> CutMesh:
     """Split `mesh` along seams and label the cloths.
 
     **Arguments:**
 
-    - `seams`: per seam `(path, bary_start, bary_end)`: the traced path and the
-      barycentric coordinates of its two endpoints (in `path.elements[0]` and
-      `path.elements[count - 1]`).
+    - `seams`: the traced seams, a batched `Path` (one row per seam, as
+      `jaxgeo.seams.trace_seams` gives) or a list of single `Path`s; each
+      path's `start` and `end` (`SurfacePoint`s) say where it begins and ends.
+      (A `(path, bary_start, bary_end)` tuple, the older form, is still
+      accepted: its barycentric coordinates replace the path's.)
 
     **Returns:** a `CutMesh`.
     """
+    if isinstance(seams, Path):  # a batch's rows, or a single path
+        rows = [seams] if np.ndim(seams.count) == 0 else list(seams)
+    else:
+        rows = list(seams)
     V = np.asarray(mesh.vertices, np.float64)
     faces = np.asarray(mesh.faces)
     edges = np.asarray(mesh.edges)
@@ -200,8 +216,8 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
     def verts_of(loc) -> set[int]:
         return {loc[1]} if loc[0] == "v" else set(edges[loc[1]].tolist())
 
-    for sid, (path, b0, b1) in enumerate(seams):
-        located = _locations(mesh_np, path, np.stack([b0, b1]))
+    for sid, seam in enumerate(rows):
+        located = _locations(mesh_np, *_path_and_ends(seam))
         locs = [loc for loc, _ in located]
         ids = [vid(loc, sid, j) for loc, j in located]
         seam_points.append(np.asarray(ids))
@@ -265,6 +281,23 @@ def cut_mesh(mesh: Mesh, seams: list[tuple[Path, np.ndarray, np.ndarray]]) -> Cu
     rank[order] = np.arange(len(order))
     cut.cloth_of_face = rank[labels]
     return cut
+
+
+def _path_and_ends(
+    seam: Path | LegacySeam,
+) -> tuple[Path, tuple[SurfacePoint, SurfacePoint]]:
+    """A seam's path and its two endpoints."""
+    if isinstance(seam, Path):
+        if seam.start is None or seam.end is None:
+            raise JaxgeoError(
+                "a seam's Path must carry its endpoints (start, end): trace it "
+                "with shortest_path, shortest_paths or seams.trace_seams"
+            )
+        return seam, (seam.start, seam.end)
+    path, b0, b1 = seam
+    n = int(path.count)
+    f0, f1 = int(np.asarray(path.elements)[0]), int(np.asarray(path.elements)[n - 1])
+    return path, (SurfacePoint(f0, np.asarray(b0)), SurfacePoint(f1, np.asarray(b1)))
 
 
 def edge_table(F: np.ndarray):

@@ -335,7 +335,7 @@ def _trace_batch(
     def one(la, lb, a, b):
         p1 = packed_point(mesh, packed, la, a, INSET)
         p2 = packed_point(mesh, packed, lb, b, INSET)
-        path = shortest_path(
+        return shortest_path(
             mesh,
             p1,
             p2,
@@ -344,7 +344,6 @@ def _trace_batch(
             max_points=options.max_points,
             throw=False,
         )
-        return path, p1.bary, p2.bary
 
     return jax.vmap(one)(loop_a, loop_b, s_a, s_b)
 
@@ -354,16 +353,16 @@ def trace_seams(
     layout: Layout,
     options: TraceOptions | None = None,
     method: Method = "exact",
-) -> tuple[Path, np.ndarray]:
+) -> Path:
     """Trace every seam of `layout` (one vmapped, jitted call of
     `jaxgeo.shortest_path` with `method`: the exact geodesic by default, as
     everywhere in jaxgeo; `options.candidates` acts on the laser method only).
 
-    **Returns:** `(paths, end_bary)`: a batched `Path` (leading axis N) and the
-    endpoints' barycentric coordinates `(N, 2, 3)`.
+    **Returns:** a batched `Path` (leading axis N, one row per seam); its
+    `start` and `end` are the seam ends on the boundary (`packed_point`).
     """
     options = options or Weights().options
-    paths, b1, b2 = _trace_batch(
+    return _trace_batch(
         mesh,
         layout.packed,
         jnp.asarray(layout.loop_a),
@@ -373,7 +372,6 @@ def trace_seams(
         options,
         method,
     )
-    return paths, np.stack([np.asarray(b1), np.asarray(b2)], axis=1)
 
 
 def unbatch(paths: Path, i: int) -> Path:
@@ -388,7 +386,7 @@ def _replay_batch(mesh, packed, loop_a, loop_b, x, traced) -> Path:
     def one(la, lb, a, b, p):
         p1 = packed_point(mesh, packed, la, a, INSET)
         p2 = packed_point(mesh, packed, lb, b, INSET)
-        return replay(mesh, normals, p1, p2, p)
+        return dataclasses.replace(replay(mesh, normals, p1, p2, p), start=p1, end=p2)
 
     return jax.vmap(one)(loop_a, loop_b, x[:n], x[n:], traced)
 
@@ -525,7 +523,7 @@ class _Evaluator:
         if _cyclic_orders(lay, x) != self.order:
             return math.inf, None, None
         # the replay re-solves the laser ray's crossings (System 16): trace with it
-        paths, _ = trace_seams(self.mesh, lay, self.w.options, "laser")
+        paths = trace_seams(self.mesh, lay, self.w.options, "laser")
         if np.any(np.asarray(paths.status) != Status.SUCCESS):
             return math.inf, None, None
         (j, aux), g = _value_and_grad(
@@ -646,12 +644,11 @@ def cut(
     `mesh` along them (`jaxgeo.pattern.cut_mesh`). Returns `(cut_mesh, paths)`."""
     from .pattern import cut_mesh
 
-    paths, ends = trace_seams(mesh, layout, options, method)
+    paths = trace_seams(mesh, layout, options, method)
     bad = np.flatnonzero(np.asarray(paths.status) != Status.SUCCESS)
     if bad.size:
         raise JaxgeoError(f"seams {bad.tolist()} could not be traced")
-    seams = [(unbatch(paths, i), ends[i, 0], ends[i, 1]) for i in range(len(ends))]
-    return cut_mesh(mesh, seams), paths
+    return cut_mesh(mesh, paths), paths
 
 
 def fit_roll(

@@ -41,6 +41,14 @@ def test_path_format_json_goes_to_stdout_summary_to_stderr(capsys):
     pts = np.array(d["points"])
     assert pts.shape == (d["count"], 3)
     np.testing.assert_allclose(pts[0], [1.0, 0.0, -0.5], atol=1e-12)
+    # the endpoints (face, barycentrics) and the method's stats come along
+    assert [d["start"]["face"], d["end"]["face"]] == [
+        d["elements"][0],
+        d["elements"][-1],
+    ]
+    for end in (d["start"], d["end"]):
+        assert len(end["bary"]) == 3 and abs(sum(end["bary"]) - 1) <= 1e-12
+    assert d["stats"]["starts"] >= 1 and "corridor_length" in d["stats"]
     assert "length" in err
 
 

@@ -68,6 +68,30 @@ def test_points_on_vertices_and_edges_snap():
     assert set(np.asarray(MESH.edges)[int(idx)]) == {f[3, 0], f[3, 2]}
 
 
+def test_surface_points_on_edges_and_vertices():
+    """`SurfacePoint.on_edge(mesh, e, t)` is the point at `t` along edge `e` in a
+    face beside it (`snap` finds the edge again, or its vertex at t = 0 or 1),
+    also vmapped over traced edges; `vertex` is the vertex; out of range: NaN."""
+    import jax
+
+    v, edges = np.asarray(MESH.vertices), np.asarray(MESH.edges)
+    ts = np.array([0.25, 0.0, 1.0, 0.7])
+    es = np.array([5, 17, 17, len(edges) - 1])
+    pts = jax.vmap(lambda e, t: jg.SurfacePoint.on_edge(MESH, e, t))(es, ts)
+    want = (1 - ts[:, None]) * v[edges[es, 0]] + ts[:, None] * v[edges[es, 1]]
+    np.testing.assert_allclose(pts.position(MESH), want, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.sum(pts.bary, axis=1), 1.0, rtol=1e-15)
+    assert (np.asarray(MESH.edge_faces)[es, 0] == np.asarray(pts.face)).all()
+    kinds, idx = jax.vmap(lambda sp: snap(MESH, sp, 1e-9))(pts)
+    assert np.asarray(kinds).tolist() == [1, 2, 2, 1]
+    assert np.asarray(idx).tolist() == [5, edges[17, 0], edges[17, 1], len(edges) - 1]
+    at = jg.SurfacePoint.vertex(MESH, 9)
+    np.testing.assert_allclose(at.position(MESH), v[9], rtol=0, atol=1e-15)
+    assert np.isnan(
+        np.asarray(jg.SurfacePoint.on_edge(MESH, len(edges), 0.5).bary)
+    ).all()
+
+
 def test_path_from_a_vertex_to_an_edge_point():
     v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
     a = v[f[0, 0]]
@@ -75,6 +99,19 @@ def test_path_from_a_vertex_to_an_edge_point():
     path = jg.shortest_path(MESH, a, b)
     assert int(path.status) == jg.Status.SUCCESS
     np.testing.assert_allclose(path.polyline()[[0, -1]], [a, b], atol=1e-12)
+    # the path carries its endpoints: where it starts and ends, in its end faces
+    assert path.start is not None and path.end is not None
+    ends = [path.start.position(MESH), path.end.position(MESH)]
+    np.testing.assert_allclose(ends, path.polyline()[[0, -1]], atol=1e-12)
+    elements = np.asarray(path.elements)[[0, int(path.count) - 1]]
+    assert [int(path.start.face), int(path.end.face)] == elements.tolist()
+    for sp in (path.start, path.end):
+        bary = np.asarray(sp.bary)
+        assert bary.shape == (3,) and (bary >= -1e-12).all()
+        assert abs(bary.sum() - 1) <= 1e-12
+    # a: a corner of its face; b: on a side (one coordinate 0, two ½)
+    np.testing.assert_allclose(np.sort(path.start.bary), [0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(np.sort(path.end.bary), [0, 0.5, 0.5], atol=1e-12)
 
 
 def test_far_point_raises_and_names_the_distance():

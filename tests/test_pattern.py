@@ -1,5 +1,7 @@
 """Cutting the cone tent along radial geodesic seams, flattening, export, CLI."""
 
+import dataclasses
+
 import ezdxf
 import numpy as np
 import pytest
@@ -8,7 +10,7 @@ import jaxgeo as jg
 from jaxgeo import seams, surfaces
 from jaxgeo.cli.pattern import main as pattern_main
 from jaxgeo.export import offset_polygon, write_dxf, write_seams_obj, write_svg
-from jaxgeo.pattern import make_pattern, strip_width
+from jaxgeo.pattern import cut_mesh, make_pattern, strip_width
 
 # Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
 pytestmark = pytest.mark.slow
@@ -51,6 +53,27 @@ def test_cone_tent_cloths(cone_pattern):
     for c in pat.cloths:  # the flattened seam keeps its 3-D length
         for l3, l2 in c.seam_lengths.values():
             assert abs(l2 - l3) / l3 < 0.005
+
+
+def test_cut_mesh_reads_the_seam_ends_from_the_paths(cone_pattern):
+    """`seams.cut` hands `cut_mesh` the batched paths, whose `start`/`end` are the
+    seam ends on the boundary; a list of rows, or the older `(path, bary_start,
+    bary_end)` tuples, cut the mesh identically."""
+    mesh, _, cut, paths, _ = cone_pattern
+    assert paths.start is not None and paths.end is not None
+    n = len(paths)
+    last = np.asarray(paths.points)[np.arange(n), np.asarray(paths.count) - 1]
+    np.testing.assert_allclose(paths.start.position(mesh), paths.points[:, 0])
+    np.testing.assert_allclose(paths.end.position(mesh), last)
+    rows = list(paths)
+    legacy = [(r, np.asarray(r.start.bary), np.asarray(r.end.bary)) for r in rows]
+    for other in (cut_mesh(mesh, rows), cut_mesh(mesh, legacy)):
+        np.testing.assert_array_equal(other.vertices, cut.vertices)
+        np.testing.assert_array_equal(other.faces, cut.faces)
+        np.testing.assert_array_equal(other.cloth_of_face, cut.cloth_of_face)
+    bare = dataclasses.replace(rows[0], start=None)
+    with pytest.raises(jg.JaxgeoError, match="must carry its endpoints"):
+        cut_mesh(mesh, [bare])
 
 
 def test_exports(cone_pattern, tmp_path):

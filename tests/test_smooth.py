@@ -200,6 +200,18 @@ def test_shortest_path_smooth_repairs_with_the_requested_weighting():
         assert int(path.status) == 0
         want = _smooth(mesh, s, e, normals="angle")
         np.testing.assert_allclose(float(path.length), float(want.length), rtol=1e-10)
+        # the smooth solve's diagnostics reach the result, beside the exact's
+        st = path.stats or {}
+        assert bool(st["converged"]) and int(st["newton_iterations"]) >= 1
+        assert 0.0 <= float(st["grad_norm"]) <= 1e-9
+        assert int(st["starts"]) >= 1 and int(st["repair_rounds"]) >= 0
+        # vertex endpoints: the Phong surface meets the mesh there
+        assert path.start is not None and path.end is not None
+        n = int(path.count)
+        ends = [path.start.position(mesh), path.end.position(mesh)]
+        np.testing.assert_allclose(
+            ends, np.asarray(path.points)[[0, n - 1]], atol=1e-12
+        )
 
 
 @pytest.mark.slow

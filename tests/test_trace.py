@@ -155,9 +155,17 @@ def test_vmap_over_endpoint_batches_matches_single_calls():
     pairs = sphere_pairs()[:4]
     p1 = jnp.asarray(np.array([a for a, _ in pairs]))
     p2 = jnp.asarray(np.array([b for _, b in pairs]))
-    lengths = jax.vmap(lambda a, b: jg.path_length(MESH, a, b, method="laser"))(p1, p2)
+    paths = jax.vmap(lambda a, b: jg.shortest_path(MESH, a, b, method="laser"))(p1, p2)
     single = [float(p.length) for p in traced("local")[:4]]
-    np.testing.assert_allclose(lengths, single, rtol=1e-12)
+    np.testing.assert_allclose(paths.length, single, rtol=1e-12)
+    # the endpoints have the batch axis, and are where each row starts and ends
+    assert paths.start is not None and paths.end is not None
+    assert paths.start.bary.shape == (4, 3) and paths.end.face.shape == (4,)
+    last = paths.points[np.arange(4), paths.count - 1]
+    np.testing.assert_allclose(
+        paths.start.position(MESH), paths.points[:, 0], atol=1e-12
+    )
+    np.testing.assert_allclose(paths.end.position(MESH), last, atol=1e-12)
 
 
 @pytest.mark.slow
@@ -197,6 +205,14 @@ def test_one_laser_trace_on_the_builtin_catenoid():
     _assert_on_edges_and_connected(path, mesh)
     line = path.polyline()
     np.testing.assert_allclose(line[[0, -1]], [a, b], atol=1e-12)
+    # the endpoints as located: the faces and coordinates they were made from
+    assert path.start is not None and path.end is not None
+    i, j = np.argmin(pts[:, 2]), np.argmax(pts[:, 2])
+    assert [int(path.start.face), int(path.end.face)] == [faces[i], faces[j]]
+    np.testing.assert_allclose(path.start.bary, bary[i], atol=1e-9)
+    np.testing.assert_allclose(path.end.bary, bary[j], atol=1e-9)
+    ends = [path.start.position(mesh), path.end.position(mesh)]
+    np.testing.assert_allclose(ends, line[[0, -1]], atol=1e-12)
     seg = np.linalg.norm(np.diff(line, axis=0), axis=1).sum()
     assert abs(seg - float(path.length)) <= 1e-12 * seg
     exact = float(jg.shortest_path(mesh, a, b).length)

@@ -36,6 +36,15 @@ def test_batch_rows_are_paths(batch):
         assert row.count == paths.count[i] and row.length == paths.length[i]
         assert row.outcome is jg.Status.SUCCESS
     np.testing.assert_array_equal(paths[-1].points, paths.points[2])
+    # each row's endpoints (a batch axis of 3) are where its polyline starts/ends
+    assert paths.start is not None and paths.end is not None
+    assert paths.start.face.shape == (3,) and paths.end.bary.shape == (3, 3)
+    np.testing.assert_allclose(np.sum(paths.start.bary, axis=1), 1.0, rtol=1e-12)
+    for row in rows:
+        assert row.start is not None and row.end is not None
+        line = row.polyline()
+        np.testing.assert_allclose(row.start.position(mesh), line[0], atol=1e-12)
+        np.testing.assert_allclose(row.end.position(mesh), line[-1], atol=1e-12)
     assert len(paths[1:]) == 2  # a slice is a smaller batch
     with pytest.raises(IndexError, match="row 3 out of range for a batch of 3"):
         paths[3]
