@@ -88,7 +88,6 @@ def main() -> None:
     ap.add_argument("--no-walls", action="store_true", help="Exact(walls=False)")
     ap.add_argument("--detours", type=int, default=None, help="Exact(detours=N)")
     ap.add_argument("--detour-rounds", type=int, default=None)
-    ap.add_argument("--patience", type=int, default=None, help="Exact(patience=N)")
     ap.add_argument("--only", default=None, help="meshes whose name contains this")
     args = ap.parse_args()
     options = {
@@ -96,7 +95,6 @@ def main() -> None:
         "walls": False if args.no_walls else None,
         "detours": args.detours,
         "detour_rounds": args.detour_rounds,
-        "patience": args.patience,
     }
     method = jg.Exact(**{k: x for k, x in options.items() if x is not None})
     print("python benchmarks/accuracy_vs_mmp.py " + " ".join(sys.argv[1:]))

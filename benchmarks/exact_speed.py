@@ -50,7 +50,6 @@ def main() -> None:
     )
     ap.add_argument("--detours", type=int, default=None, help="Exact(detours=N)")
     ap.add_argument("--detour-rounds", type=int, default=None)
-    ap.add_argument("--patience", type=int, default=None, help="Exact(patience=N)")
     ap.add_argument("--no-walls", action="store_true", help="Exact(walls=False)")
     args = ap.parse_args()
     import potpourri3d as pp3d
@@ -59,7 +58,6 @@ def main() -> None:
         "max_starts": args.starts,
         "detours": args.detours,
         "detour_rounds": args.detour_rounds,
-        "patience": args.patience,
         "walls": False if args.no_walls else None,
     }
     method = jg.Exact(**{k: x for k, x in options.items() if x is not None})

@@ -479,9 +479,7 @@ def _fresh(corridor, n, status0, dtype) -> _Lane:
     )
 
 
-def _refine(
-    mesh, theta, corridor, n, status0, s, t, max_iterations, tol, group=1, patience=None
-):
+def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
     """Flip until no wrapped vertex admits a shorter way round, for a batch of
     starts (leading axis T of every argument but `mesh`, `theta`).
 
@@ -490,17 +488,10 @@ def _refine(
     run as long as the slowest. Above `POOL_MIN` starts, a pool of W = T/4 worker
     lanes runs them instead: a worker whose start has converged (or failed) writes
     its result and takes the next start, so the loop costs about the mean number of
-    rounds, T/W times, plus one slowest start.
-
-    `patience` (a traced int, or None): once one start of a pair (the `group`
-    consecutive lanes of one pair) has converged, the pair's other starts get at
-    most this many more rounds; those still flipping then end as REFINE_FAILED."""
+    rounds, T/W times, plus one slowest start."""
     dtype = mesh.vertices.dtype
     corridor, n = _clean(mesh, corridor, n, s, t)
     tasks = corridor.shape[0]
-    pairs = tasks // group
-    never = jnp.iinfo(jnp.int32).max // 2
-    wait = never if patience is None else patience
 
     def finished(lane):  # converged, failed, or out of rounds
         return lane.done | (lane.iterations >= max_iterations)
@@ -509,35 +500,11 @@ def _refine(
         status = jnp.where(lane.done, lane.status, Status.REFINE_FAILED)
         return eqx.tree_at(lambda x: x.status, lane, status.astype(jnp.int32))
 
-    def first_success(first, pair, lane, r):
-        """Per pair, the round its first start converged (`never`: none yet)."""
-        hit = lane.done & (lane.status == Status.SUCCESS)
-        return first.at[jnp.where(hit, pair, pairs)].min(r, mode="drop")
-
-    def cut(lane, pair, first, r):
-        """Mark done (status REFINE_FAILED) the lanes whose patience ran out."""
-        out = ~lane.done & (r >= first[jnp.minimum(pair, pairs - 1)] + wait)
-        out = out & (pair < pairs)
-        return eqx.tree_at(
-            lambda x: (x.done, x.status),
-            lane,
-            (lane.done | out, jnp.where(out, Status.REFINE_FAILED, lane.status)),
-        )
-
-    first0 = jnp.full(pairs, never, jnp.int32)
     if tasks <= POOL_MIN:
-        pair = jnp.arange(tasks, dtype=jnp.int32) // group
-
-        def body(state):
-            lane, first, r = state
-            lane = _round(mesh, theta, lane, s, t, tol)
-            first = first_success(first, pair, lane, r + 1)
-            return cut(lane, pair, first, r + 1), first, r + 1
-
-        lane, _, _ = jax.lax.while_loop(
-            lambda state: jnp.any(~finished(state[0])),
-            body,
-            (_fresh(corridor, n, status0, dtype), first0, jnp.int32(0)),
+        lane = jax.lax.while_loop(
+            lambda lane: jnp.any(~finished(lane)),
+            lambda lane: _round(mesh, theta, lane, s, t, tol),
+            _fresh(corridor, n, status0, dtype),
         )
         return result(lane)
 
@@ -556,20 +523,17 @@ def _refine(
         idx = jnp.minimum(task, tasks - 1)
         return jax.tree.map(lambda x: x[idx], s), jax.tree.map(lambda x: x[idx], t)
 
-    worker = jnp.arange(workers, dtype=jnp.int32)
-    task = jnp.where(worker < live, order[jnp.minimum(worker, tasks - 1)], tasks)
+    first = jnp.arange(workers, dtype=jnp.int32)
+    task = jnp.where(first < live, order[jnp.minimum(first, tasks - 1)], tasks)
 
     def cond(state):
-        lane, _, next_, _, _, _ = state
+        lane, _, next_, _ = state
         return jnp.any(~finished(lane)) | (next_ < live)
 
     def body(state):
-        lane, task, next_, results, first, r = state
+        lane, task, next_, results = state
         s_w, t_w = ends(task)
         lane = _round(mesh, theta, lane, s_w, t_w, tol)
-        pair = jnp.where(task < tasks, task // group, pairs)
-        first = first_success(first, pair, lane, r + 1)
-        lane = cut(lane, pair, first, r + 1)
         out = finished(lane)
         # write what finished, then hand out the next starts in worker order
         slot = jnp.where(out & (task < tasks), task, tasks)
@@ -586,10 +550,10 @@ def _refine(
             fresh,
             lane,
         )
-        return lane, task, next_ + jnp.sum(out, dtype=jnp.int32), results, first, r + 1
+        return lane, task, next_ + jnp.sum(out, dtype=jnp.int32), results
 
-    init = (load(task), task, jnp.minimum(live, workers), results, first0, jnp.int32(0))
-    results = jax.lax.while_loop(cond, body, init)[3]
+    init = (load(task), task, jnp.minimum(live, workers), results)
+    _, _, _, results = jax.lax.while_loop(cond, body, init)
     return results
 
 
@@ -697,7 +661,6 @@ def exact_solve(
     detours: int = 16,
     detour_rounds: int = 2,
     walls: bool = True,
-    patience: int | None = None,
 ) -> ExactResult:
     """The exact polyhedral geodesics from `start[i]` to `end[i]` for a batch of
     endpoint pairs (leading axis B of `start.face`, `start.bary`, …; see the module
@@ -712,9 +675,7 @@ def exact_solve(
     many corridors that pass the best path's nearest cone vertices on their other
     side (`_detours`), and with `walls` 8 more that pass a whole stretch of one of
     its walls on the other side (`_wall_flip`), in `detour_rounds` rounds, each
-    from the best path so far; `patience`: once a pair's first start has
-    converged, its other starts get at most this many more rounds (None: no
-    limit).
+    from the best path so far.
 
     **Returns:** an `ExactResult` with a leading batch axis.
     """
@@ -750,7 +711,6 @@ def exact_solve(
     # rounds takes the detours of the best path so far, k at a time. All phases
     # run through one `_refine` inside a fori_loop: it is the bulk of the program,
     # and compiled once instead of once per phase (a third of the compile time).
-    never = jnp.iinfo(jnp.int32).max // 2  # (patience: the detours have none)
     n_walls = 2 * len(WALL_STRETCHES)
     cone_chunks = -(-detours // k) if detours else 0
     chunks = cone_chunks + (-(-n_walls // k) if walls else 0)
@@ -804,17 +764,7 @@ def exact_solve(
             lambda a, b: jnp.where(p == 0, a, b), starts, part
         )
         lanes = _refine(
-            smesh,
-            theta,
-            corridor,
-            n,
-            status0,
-            s_l,
-            t_l,
-            max_iterations,
-            tol,
-            group=k,
-            patience=None if patience is None else jnp.where(p == 0, patience, never),
+            smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol
         )
         lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
         best, ok = _shortest(lanes)

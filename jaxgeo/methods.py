@@ -43,7 +43,6 @@ class Exact(eqx.Module):
     detours: int = 16
     detour_rounds: int = 2
     walls: bool = True
-    patience: int | None = None
     corridor_capacity: int | None = None
 
     def solve(self, mesh, start, end, initial, max_points, differentiable) -> Path:
@@ -57,7 +56,6 @@ class Exact(eqx.Module):
             detours=self.detours,
             detour_rounds=self.detour_rounds,
             walls=self.walls,
-            patience=self.patience,
             corridor_capacity=self.corridor_capacity,
         )
         status = jnp.where(initial >= 0, initial, res.status).astype(jnp.int32)

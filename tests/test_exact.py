@@ -186,54 +186,6 @@ def test_worker_pool_refines_every_start_as_one_lane_would(monkeypatch):
 
 
 @pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
-@pytest.mark.parametrize("pool", [False, True])
-def test_patience_cuts_the_other_starts_after_the_first_converged(pool, monkeypatch):
-    """`patience`: once a pair's first start has converged, its other starts get
-    at most that many more rounds. The first start to converge is untouched (same
-    rounds and length as without patience), no other start runs longer, and the
-    starts cut end as REFINE_FAILED; in a lane each and in the pool alike."""
-    from jaxgeo import exact
-
-    from .test_sleeve import _starts
-
-    mesh = unit_icosphere(2)
-    rng = np.random.default_rng(3)
-    corridor, n, s, t = _starts(mesh, jnp.asarray(rng.integers(0, 162, (40, 2))))
-    theta = exact.vertex_angle_sums(mesh.vertices, mesh.faces)
-    status0 = jnp.where(n >= 2, -1, 0).astype(jnp.int32)
-    tol = 10 * float(jnp.finfo(jnp.float64).eps) ** 0.5
-    if pool:
-        monkeypatch.setattr(exact, "POOL_MIN", 4)  # 40 starts on 10 workers
-
-    def refine(patience):  # 10 "pairs" of 4 consecutive starts
-        return jax.jit(
-            lambda *x: exact._refine(
-                mesh, theta, *x, 256, tol, group=4, patience=patience
-            )
-        )(corridor, n, status0, s, t)
-
-    free, cut = refine(None), refine(jnp.int32(1))
-    its, ok = np.asarray(free.iterations), np.asarray(free.status) == 0
-    its_cut, st_cut = np.asarray(cut.iterations), np.asarray(cut.status)
-    moving = np.asarray(status0) < 0
-    cut_any = False
-    for g in range(10):
-        lanes = slice(4 * g, 4 * g + 4)
-        conv = ok[lanes] & moving[lanes]
-        if not conv.any():
-            continue
-        first = its[lanes][conv].min()
-        assert (its_cut[lanes] <= first + 1).all()
-        winner = int(np.flatnonzero(conv & (its[lanes] == first))[0]) + 4 * g
-        assert st_cut[winner] == 0 and its_cut[winner] == first
-        np.testing.assert_allclose(cut.length[winner], free.length[winner], rtol=0)
-        late = moving[lanes] & (its[lanes] > first + 1)
-        assert (st_cut[lanes][late] == int(jg.Status.REFINE_FAILED)).all()
-        cut_any |= bool(late.any())
-    assert cut_any  # the case is exercised
-
-
-@pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_gradient_matches_central_differences():
     """d length / d vertices and d length / d endpoint barycentrics, against
     central differences of step 1e-6 (truncation ~1e-12, rounding ~1e-10 /
