@@ -218,13 +218,7 @@ def _lane(
     slack = 1e3 * eps_of(dtype)
     fan_width = mesh.vertex_faces.shape[1]
     boundary_edge = mesh.edge_faces[:, 1] < 0
-    is_boundary_vertex = (
-        jnp.zeros(mesh.n_vertices, bool)
-        .at[edges[:, 0]]
-        .max(boundary_edge)
-        .at[edges[:, 1]]
-        .max(boundary_edge)
-    )
+    is_boundary_vertex = mesh.is_boundary_vertex
 
     if options.candidates == "all":
         all_edges = jnp.arange(mesh.n_edges, dtype=edges.dtype)
