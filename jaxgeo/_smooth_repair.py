@@ -76,30 +76,40 @@ def fan_arc(
     round: `(edges, faces, n, ok)`, where `edges[d, :n[d]]` are the edges in order
     and `faces[d, t]` the face before `edges[d, t]` (so f_in first); `ok[d]` is
     False where the walk meets the boundary (an open fan has one way) or never
-    reaches f_out. K is the mesh's largest valence."""
+    reaches f_out. K is the mesh's largest valence.
+
+    Read from the mesh's fan tables (`Mesh.fan_faces`, `jaxgeo._fans`): way 0
+    runs counter-clockwise (fan positions up), way 1 clockwise. Past the step
+    that arrives or meets the boundary, the rows hold 0; a walk that never
+    arrives goes K steps (round a closed fan again)."""
     k = max(mesh.vertex_faces.shape[1], 1)
+    size = mesh.fan_size[v]
+    closed = mesh.fan_closed[v]
+    start = mesh.corner_fan_pos[f_in, jnp.argmax(mesh.faces[f_in] == v)]
+    same = f_in == f_out
+    t = jnp.arange(k)
+
+    def face_at(pos):
+        """The face at fan position `pos` (round a closed fan), −1 off an open
+        one."""
+        pos = jnp.where(closed, jnp.mod(pos, jnp.maximum(size, 1)), pos)
+        inside = (pos >= 0) & (pos < size)
+        return jnp.where(inside, mesh.fan_faces[v, jnp.clip(pos, 0, k - 1)], -1)
 
     def walk(direction):
-        def step(t, state):
-            face, edges, faces, n, done, ok = state
-            e = _exit_edge(mesh, face, v, direction)
-            pair = mesh.edge_faces[e]
-            nxt = jnp.where(pair[0] == face, pair[1], pair[0])
-            edges = edges.at[t].set(jnp.where(done, edges[t], e))
-            faces = faces.at[t].set(jnp.where(done, faces[t], face))
-            arrived = ~done & (nxt == f_out)
-            blocked = ~done & (nxt < 0)
-            n = jnp.where(arrived, t + 1, n)
-            ok = ok | arrived
-            done = done | arrived | blocked
-            face = jnp.where(done, face, nxt)
-            return face, edges, faces, n, done, ok
-
-        zeros = jnp.zeros(k, jnp.int32)
-        same = f_in == f_out
-        state = (f_in, zeros, zeros, jnp.int32(0), same, same)
-        _, edges, faces, n, _, ok = jax.lax.fori_loop(0, k, step, state)
-        return edges, faces, n, ok
+        way = 1 - 2 * direction
+        faces = face_at(start + way * t)  # the face before edge t
+        nxt = face_at(start + way * (t + 1))  # the face after it
+        exits = jax.vmap(lambda f: _exit_edge(mesh, f, v, direction))
+        edges = exits(jnp.maximum(faces, 0))
+        stop = (nxt == f_out) | (nxt < 0)  # arrived, or met the boundary
+        first = jnp.argmax(stop)
+        walked = ~same & (jnp.cumsum(stop) - stop == 0)  # up to the first stop
+        arrived = ~same & jnp.any(stop) & (nxt[first] == f_out)
+        edges = jnp.where(walked, edges, 0).astype(jnp.int32)
+        faces = jnp.where(walked, faces, 0).astype(jnp.int32)
+        n = jnp.where(arrived, first + 1, 0).astype(jnp.int32)
+        return edges, faces, n, same | arrived
 
     return jax.vmap(walk)(jnp.arange(2))
 

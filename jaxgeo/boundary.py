@@ -71,46 +71,41 @@ def boundary_loops(mesh: Mesh) -> list[BoundaryLoop]:
     """The boundary loops of `mesh`, longest (by perimeter) first.
 
     Each loop runs along the face orientation: for a boundary face (a, b, c) with
-    boundary edge a→b, the loop goes from a to b. Raises `JaxgeoError` for a
-    closed mesh.
+    boundary edge a→b, the loop goes from a to b. It starts at its lowest
+    vertex index. Read from the mesh's own record of its boundary
+    (`Mesh.boundary_next`, the first face of each boundary vertex's fan). Raises
+    `JaxgeoError` for a closed mesh.
     """
-    faces = np.asarray(mesh.faces)
-    edges = np.asarray(mesh.edges)
-    edge_faces = np.asarray(mesh.edge_faces)
-    face_edges = np.asarray(mesh.face_edges)
-    bnd = np.flatnonzero(edge_faces[:, 1] < 0)
-    if len(bnd) == 0:
+    nxt = np.asarray(mesh.boundary_next)
+    on = np.flatnonzero(nxt >= 0)
+    if on.size == 0:
         raise JaxgeoError("the mesh is closed: it has no boundary loops")
-    nxt: dict[int, tuple[int, int, int, int]] = {}
-    for e in bnd:
-        f = int(edge_faces[e, 0])
-        opp = int(np.flatnonzero(face_edges[f] == e)[0])
-        ca, cb = (opp + 1) % 3, (opp + 2) % 3  # oriented edge: corner ca -> cb
-        a, b = int(faces[f, ca]), int(faces[f, cb])
-        if {a, b} != set(edges[e].tolist()):
-            raise JaxgeoError("inconsistent face_edges at a boundary edge")
-        nxt[a] = (b, f, ca, cb)
+    faces = np.asarray(mesh.faces)
+    # the edge v → nxt[v] is the first face of v's (open) fan: corners ca → cb
+    face = np.asarray(mesh.fan_faces)[:, 0]
+    corner_a = np.argmax(faces[face[on]] == on[:, None], axis=1)
+    corner_b = np.argmax(faces[face[on]] == nxt[on][:, None], axis=1)
+    corners = np.zeros((nxt.size, 2), np.int64)
+    corners[on] = np.stack([corner_a, corner_b], axis=1)
+    step = nxt.tolist()
+    seen = np.zeros(nxt.size, bool)
     loops: list[BoundaryLoop] = []
-    seen: set[int] = set()
-    for start in sorted(nxt):
-        if start in seen:
+    for start in on.tolist():  # ascending: each loop from its lowest vertex
+        if seen[start]:
             continue
-        vs, fs, cs = [], [], []
-        v = start
-        while v not in seen:
-            seen.add(v)
-            b, f, ca, cb = nxt[v]
+        vs = [start]
+        v = step[start]
+        while v != start:
+            if v < 0 or seen[v] or len(vs) > on.size:
+                raise JaxgeoError("boundary is not a set of simple loops")
             vs.append(v)
-            fs.append(f)
-            cs.append((ca, cb))
-            v = b
-        if v != start:
-            raise JaxgeoError("boundary is not a set of simple loops")
+            v = step[v]
+        seen[vs] = True
         loops.append(
             BoundaryLoop(
                 jnp.asarray(vs, jnp.int32),
-                jnp.asarray(fs, jnp.int32),
-                jnp.asarray(cs, jnp.int32),
+                jnp.asarray(face[vs], jnp.int32),
+                jnp.asarray(corners[vs], jnp.int32),
             )
         )
     loops.sort(key=lambda lp: -float(lp.length(mesh)))

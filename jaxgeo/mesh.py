@@ -382,6 +382,10 @@ class Mesh(eqx.Module):
     - `mean_edge_length`: a scalar length scale (tolerances are relative to it).
     - `fan_faces`, `fan_spokes`, `fan_size`, `fan_closed`, `corner_fan_pos`: the
       faces and edges round every vertex in rotational order (`jaxgeo._fans`).
+    - `boundary_next`: `(V,)` for a boundary vertex the next vertex of its
+      boundary loop (the loop runs the way the faces are oriented), −1 for any
+      other vertex; `is_boundary_vertex` is `boundary_next >= 0`. The one record
+      of the boundary: `normals`, `trace` and `boundary` read it.
     - `landmark_pred_vertex`, `landmark_pred_edge`, `landmark_dist`:
       shortest-path forests of `landmarks` landmark slots on the graph of vertices
       and edge midpoints, from which the exact method reads its starting paths
@@ -416,6 +420,7 @@ class Mesh(eqx.Module):
     fan_size: Int[Array, " V"]
     fan_closed: Bool[Array, " V"]
     corner_fan_pos: Int[Array, "F 3"]
+    boundary_next: Int[Array, " V"]
     landmark_pred_vertex: Int[Array, "M V"]
     landmark_pred_edge: Int[Array, "M E"]
     landmark_dist: Float[Array, "M V"]
@@ -454,6 +459,7 @@ class Mesh(eqx.Module):
         self.fan_size = jnp.asarray(fans["fan_size"])
         self.fan_closed = jnp.asarray(fans["fan_closed"])
         self.corner_fan_pos = jnp.asarray(fans["corner_fan_pos"])
+        self.boundary_next = jnp.asarray(fans["boundary_next"])
         vertex_component = np.where(
             fans["fan_size"] > 0, component[np.maximum(fans["fan_faces"][:, 0], 0)], -1
         )
@@ -480,6 +486,11 @@ class Mesh(eqx.Module):
     def boundary_edges(self) -> Int[Array, " B"]:
         """Indices of the edges with a single face (not jit-able: variable size)."""
         return jnp.flatnonzero(self.edge_faces[:, 1] < 0)
+
+    @property
+    def is_boundary_vertex(self) -> Bool[Array, " V"]:
+        """Whether each vertex lies on a boundary edge (jit-able)."""
+        return self.boundary_next >= 0
 
     @property
     def size_class(self) -> SizeClass:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Literal
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._errors import JaxgeoError
 from ._numerics import corner_angles, safe_normalize
@@ -98,17 +98,6 @@ def vertex_normals(
 #: whose points lie near one line or conic in the tangent plane falls far below,
 #: and the vertex keeps its given normal.
 _FIT_CONDITION = 1e-6
-
-
-def _boundary_vertices(mesh: Mesh) -> Bool[Array, " V"]:
-    """Vertices on a boundary edge (an edge with one face)."""
-    open_edge = (mesh.edge_faces[:, 1] < 0).astype(jnp.int32)
-    hits = (
-        jnp.zeros(mesh.n_vertices, jnp.int32)
-        .at[mesh.edges.reshape(-1)]
-        .add(jnp.repeat(open_edge, 2))
-    )
-    return hits > 0
 
 
 def _fit_stencil(mesh: Mesh, verts: Int[Array, " B"]) -> Int[Array, "B S"]:  # S = 9K²
@@ -226,7 +215,7 @@ def fit_boundary_normals(
     if n_open <= 0:
         return normals
     n_v = mesh.n_vertices
-    verts = jnp.nonzero(_boundary_vertices(mesh), size=n_open, fill_value=n_v)[0]
+    verts = jnp.nonzero(mesh.is_boundary_vertex, size=n_open, fill_value=n_v)[0]
     real = verts < n_v
     verts = jnp.minimum(verts, n_v - 1)
     ids = _fit_stencil(mesh, verts)

@@ -3,9 +3,11 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxgeo as jg
 from jaxgeo import surfaces
+from jaxgeo._errors import JaxgeoError
 from jaxgeo.boundary import (
     boundary_loops,
     loop_parameter,
@@ -31,6 +33,32 @@ def test_loops_of_cone_tent():
 def test_twin_peak_has_three_loops():
     mesh = jg.Mesh(*surfaces.twin_peak_tent(n_side=4, n_radial=4))
     assert len(boundary_loops(mesh)) == 3
+
+
+def test_loops_follow_the_faces_from_their_lowest_vertex():
+    """Each loop starts at its lowest vertex and runs through its edges as their
+    faces do (`corners` name them); together the loops hold every boundary edge
+    once, longest loop first."""
+    mesh = jg.Mesh(*surfaces.twin_peak_tent(n_side=4, n_radial=4))
+    faces = np.asarray(mesh.faces)
+    walked = []
+    loops = boundary_loops(mesh)
+    for lp in loops:
+        vs, fs, cs = (np.asarray(x) for x in (lp.vertices, lp.faces, lp.corners))
+        assert vs[0] == vs.min() and len(set(vs.tolist())) == lp.size
+        np.testing.assert_array_equal(faces[fs, cs[:, 0]], vs)
+        np.testing.assert_array_equal(faces[fs, cs[:, 1]], np.roll(vs, -1))
+        assert np.all((cs[:, 1] - cs[:, 0]) % 3 == 1)  # the face's own order
+        walked += [tuple(sorted(e)) for e in zip(vs.tolist(), np.roll(vs, -1))]
+    edges = np.asarray(mesh.edges)[np.asarray(mesh.edge_faces)[:, 1] < 0]
+    assert sorted(walked) == sorted(map(tuple, edges.tolist()))
+    lengths = [float(lp.length(mesh)) for lp in loops]
+    assert lengths == sorted(lengths, reverse=True)
+
+
+def test_a_closed_mesh_has_no_loops():
+    with pytest.raises(JaxgeoError, match="closed"):
+        boundary_loops(jg.Mesh(*surfaces.icosphere(1)))
 
 
 def test_point_at_arc_length_and_periodic():

@@ -361,6 +361,37 @@ def test_open_grid_boundary():
     check_connectivity(mesh)
 
 
+def holed_grid():
+    """`grid(4, 3)` without the two faces of square (1, 1) and with an unused
+    vertex: an outer boundary loop and a hole."""
+    v, f = grid(4, 3)
+    f = np.delete(f, [4, 4 + 12], axis=0)
+    return np.concatenate([v, [[9.0, 9.0, 9.0]]]), f
+
+
+@pytest.mark.parametrize(
+    "make", [lambda: grid(4, 3), holed_grid, lambda: icosphere(1)], ids=str
+)
+def test_boundary_next_runs_along_the_boundary_edges_faces(make):
+    """`boundary_next[a] = b` exactly for the boundary edges a → b as their face
+    runs through them; −1 for interior and unused vertices."""
+    v, f = make()
+    mesh = Mesh(v, f)
+    edges = np.asarray(mesh.edges)[np.asarray(mesh.edge_faces)[:, 1] < 0]
+    boundary = {tuple(e) for e in edges.tolist()}
+    expect = np.full(mesh.n_vertices, -1)
+    for a, b in directed_half_edges(np.asarray(mesh.faces)).tolist():
+        if (min(a, b), max(a, b)) in boundary:
+            assert expect[a] == -1  # one boundary edge leaves each vertex
+            expect[a] = b
+    assert (expect >= 0).sum() == len(boundary)
+    np.testing.assert_array_equal(np.asarray(mesh.boundary_next), expect)
+    on_edge = np.isin(np.arange(mesh.n_vertices), edges)
+    np.testing.assert_array_equal(np.asarray(mesh.is_boundary_vertex), on_edge)
+    inside = jax.jit(lambda m: m.is_boundary_vertex)(mesh)
+    np.testing.assert_array_equal(np.asarray(inside), on_edge)
+
+
 def test_two_disjoint_spheres_two_components():
     v, f = icosphere(1)
     mesh = Mesh(

@@ -79,6 +79,7 @@ def test_padded_layout(make):
     assert np.all(np.asarray(p.edge_faces)[n_e:] == -1)
     assert np.all(np.asarray(p.edge_faces)[:n_e, 0] >= 0)  # the real-edge mask
     assert np.all(np.asarray(p.fan_size)[n_v:] == 0)
+    assert np.all(np.asarray(p.boundary_next)[n_v:] == -1)  # off the boundary
     assert np.all(np.asarray(p.fan_faces)[:, mesh.fan_faces.shape[1] :] == -1)
     assert np.all(np.isinf(np.asarray(p.landmark_dist)[:, n_v:]))
     assert np.all(np.asarray(p.landmark_pred_vertex)[:, n_v:] == -1)
