@@ -458,42 +458,45 @@ def _band_matrix(u, L, sw, edges, vmask, pos, free, nblk, nb, full):
 
 
 def _band_factor(diag, low):
-    """Block Cholesky of a symmetric block-tridiagonal matrix: the diagonal
-    factors `Lk` and `Wk = E_k Lk^-T` (NaN where it is not positive definite)."""
+    """Block Cholesky of a symmetric block-tridiagonal matrix: the inverses of
+    the diagonal factors `Lk^-1` and `Wk = E_k Lk^-T` (NaN where it is not
+    positive definite). The inverses make every solve matrix products: one
+    triangular solve per block here and none in `_band_solve` (jaxlib's
+    batched trsm calls, not their flops, dominated on the loaded 2-core CPU)."""
     tri = jax.scipy.linalg.solve_triangular
-    l0 = jnp.linalg.cholesky(diag[0])
+    eye = jnp.eye(diag.shape[-1])
+    i0 = tri(jnp.linalg.cholesky(diag[0]), eye, lower=True)
 
-    def step(lk, xs):
+    def step(ik, xs):
         e, dk1 = xs
-        w = tri(lk, e.T, lower=True).T
-        lk1 = jnp.linalg.cholesky(dk1 - w @ w.T)
-        return lk1, (w, lk1)
+        w = e @ ik.T
+        ik1 = tri(jnp.linalg.cholesky(dk1 - w @ w.T), eye, lower=True)
+        return ik1, (w, ik1)
 
-    _, (w, ls) = jax.lax.scan(step, l0, (low, diag[1:]))
-    return jnp.concatenate([l0[None], ls]), w
+    _, (w, inv) = jax.lax.scan(step, i0, (low, diag[1:]))
+    return jnp.concatenate([i0[None], inv]), w
 
 
 def _band_solve(fac, rhs):
     """Solve with `_band_factor`'s factors; `rhs` `(nblk, nb)`."""
-    lk, w = fac
-    tri = jax.scipy.linalg.solve_triangular
-    y0 = tri(lk[0], rhs[0], lower=True)
+    inv, w = fac
+    y0 = inv[0] @ rhs[0]
 
     def fwd(y, xs):
-        l1, wk, b1 = xs
-        y1 = tri(l1, b1 - wk @ y, lower=True)
+        i1, wk, b1 = xs
+        y1 = i1 @ (b1 - wk @ y)
         return y1, y1
 
-    _, ys = jax.lax.scan(fwd, y0, (lk[1:], w, rhs[1:]))
+    _, ys = jax.lax.scan(fwd, y0, (inv[1:], w, rhs[1:]))
     ys = jnp.concatenate([y0[None], ys])
-    xl = tri(lk[-1], ys[-1], lower=True, trans=1)
+    xl = inv[-1].T @ ys[-1]
 
     def bwd(x, xs):
-        l0, wk, y0 = xs
-        x0 = tri(l0, y0 - wk.T @ x, lower=True, trans=1)
+        i0, wk, y0 = xs
+        x0 = i0.T @ (y0 - wk.T @ x)
         return x0, x0
 
-    _, xs = jax.lax.scan(bwd, xl, (lk[:-1], w, ys[:-1]), reverse=True)
+    _, xs = jax.lax.scan(bwd, xl, (inv[:-1], w, ys[:-1]), reverse=True)
     return jnp.concatenate([xs, xl[None]])
 
 
