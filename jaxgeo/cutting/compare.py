@@ -2,7 +2,10 @@
 width-only optimisation (`jaxgeo.seams.fit_roll`) and the stress optimisation
 (`optimise_seams`), on the twin-peak tent and the four-point sail.
 
-    python -m jaxgeo.cutting.compare --steps 6 --rounds 2
+    OPENBLAS_NUM_THREADS=1 python -m jaxgeo.cutting.compare --steps 6 --rounds 2
+
+(one BLAS thread: on a shared 2-core CPU the batched LAPACK calls of the
+banded flattening otherwise spin against other processes, docs/cutting.md)
 
 Every layout is measured the same way: seams traced with the optimiser's
 method, cut, flattened by `jaxgeo.pattern.make_pattern`, compensated by the
