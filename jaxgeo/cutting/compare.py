@@ -2,7 +2,10 @@
 width-only optimisation (`jaxgeo.seams.fit_roll`) and the stress optimisation
 (`optimise_seams`), on the twin-peak tent and the four-point sail.
 
-    python -m jaxgeo.cutting.compare --steps 6 --rounds 2
+    OPENBLAS_NUM_THREADS=1 python -m jaxgeo.cutting.compare --steps 6 --rounds 2
+
+(one BLAS thread: on a shared 2-core CPU the batched LAPACK calls of the
+banded flattening otherwise spin against other processes, docs/cutting.md)
 
 Every layout is measured the same way: seams traced with the optimiser's
 method, cut, flattened by `jaxgeo.pattern.make_pattern`, compensated by the
@@ -69,7 +72,12 @@ def measure(mesh, layout, compensation: Compensation, method: Method) -> dict:
 
 
 def run(
-    steps: int, rounds: int, log, only: str | None = None, max_move: float = 0.02
+    steps: int,
+    rounds: int,
+    log,
+    only: str | None = None,
+    max_move: float = 0.02,
+    solver: str = "banded",
 ) -> list[dict]:
     eps = np.asarray(PRESTRESS.strain(MATERIAL))[:2]
     comp = Compensation(*(100 * eps))
@@ -78,7 +86,11 @@ def run(
         if only and only not in c.name:
             continue
         settings = Settings(
-            MATERIAL, PRESTRESS, (float(eps[0]), float(eps[1])), c.roll_width
+            MATERIAL,
+            PRESTRESS,
+            (float(eps[0]), float(eps[1])),
+            c.roll_width,
+            solver=solver,
         )
         method = settings.method
         log(f"{c.name}: {c.mesh.n_faces} faces, {c.layout.n_seams} seams")
@@ -139,13 +151,19 @@ def main(argv: list[str] | None = None) -> int:
         default=0.02,
         help="the stress optimiser's largest seam-end move per round (of the loop)",
     )
+    p.add_argument(
+        "--solver",
+        default="banded",
+        choices=["banded", "sparse", "qr", "lsmr"],
+        help="the flattening's solver in the stress objective (Settings.solver)",
+    )
     a = p.parse_args(argv)
     t0 = time.time()
 
     def log(msg: str) -> None:
         print(f"[{time.time() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
 
-    rows = run(a.steps, a.rounds, log, a.only, a.max_move)
+    rows = run(a.steps, a.rounds, log, a.only, a.max_move, a.solver)
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=2)

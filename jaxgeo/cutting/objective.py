@@ -5,10 +5,12 @@
 (`jax.vmap` of `jaxgeo.shortest_path`, differentiable points) → cut vertices (a
 fixed weighted sum of mesh vertices and seam points, `CutMesh.sources`: the cut
 topology is held at a **template** built at some layout) → each cloth flattened
-by least edge-length strain (Newton steps with a sparse LU on the host,
-`jax.pure_callback`, started from the template's converged flattening;
-differentiated implicitly through the optimality condition, not through its
-iterations: `jax.custom_jvp` with one sparse solve of the Hessian per tangent or
+by least edge-length strain (Gauss-Newton then Newton steps in JAX, each a
+block-tridiagonal Cholesky of the system in reverse Cuthill-McKee order,
+`_jax_newton`; fixed shapes, so it runs under jit, vmap and grad on CPU and
+GPU; started from the template's converged flattening; differentiated
+implicitly through the optimality condition, not through its iterations:
+`jax.custom_jvp` with one banded solve of the Hessian per tangent or
 cotangent, `jax.lax.custom_linear_solve`) → turned to its warp (the template's
 angle) and shrunk by the uniform compensation → reassembly stress (`reassembly`) →
 
@@ -30,6 +32,7 @@ changes and a new template is needed (`optimise`).
 from __future__ import annotations
 
 import dataclasses
+from functools import partial
 
 import equinox as eqx
 import jax
@@ -77,15 +80,18 @@ class Settings(eqx.Module):
     fit: float = 10.0
     method: Method = eqx.field(static=True, default="laser")
     max_points: int = eqx.field(static=True, default=160)
-    #: linear solver of the flattening's Gauss-Newton steps and its adjoint:
-    #: "sparse" (default: Newton steps on the host, each a sparse LU of the
-    #: Hessian, `scipy.sparse.linalg.splu`, `_host_newton`; the adjoint one
-    #: more sparse LU), "qr" (optimistix's Gauss-Newton, dense QR of the
-    #: Jacobian: ~1e10 flops per step for a cloth of 1000 faces; linear
-    #: convergence, J = inf at the twin-peak tent's start layout) or "lsmr"
-    #: (matrix-free: one JVP and one VJP per iteration; on the four-point sail
-    #: its Gauss-Newton steps do not meet their tolerance in 30 steps).
-    solver: str = eqx.field(static=True, default="sparse")
+    #: linear solver of the flattening's Newton steps and its adjoint:
+    #: "banded" (default; JAX only, fixed shapes: Gauss-Newton then Newton
+    #: steps, each one block-tridiagonal Cholesky of the system reordered by
+    #: reverse Cuthill-McKee, `_jax_newton`; the adjoint one more), "sparse"
+    #: (the same iteration on the host, scipy `splu` inside `jax.pure_callback`:
+    #: a reference, not jit-portable to GPU), "qr" (optimistix's Gauss-Newton,
+    #: dense QR of the Jacobian: ~1e10 flops per step for a cloth of 1000
+    #: faces; linear convergence, J = inf at the twin-peak tent's start layout)
+    #: or "lsmr" (matrix-free: one JVP and one VJP per iteration; on the
+    #: four-point sail its Gauss-Newton steps do not meet their tolerance in 30
+    #: steps).
+    solver: str = eqx.field(static=True, default="banded")
 
 
 class Template(eqx.Module):
@@ -108,6 +114,13 @@ class Template(eqx.Module):
     fmask: Float[Array, "C Fc"]
     uv0: Float[Array, "C Vc 2"]
     rot: Float[Array, "C 2 2"]
+    #: each vertex's place in the cloth's reverse Cuthill-McKee order (padded
+    #: vertices last), and 0 at the three coordinates that fix the gauge in a
+    #: banded solve (`_gauge_pins`), else 1
+    pos: Int[Array, "C Vc"]
+    free: Float[Array, "C Vc 2"]
+    #: shapes only: one block of the banded solve (block x blocks >= 2 Vc)
+    blocks: Float[Array, "B b"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,18 +129,49 @@ class Capacity:
     cloth_vertices: int
     cloth_edges: int
     cloth_faces: int
+    block: int = 64  # block size of the banded solve (> its bandwidth in dofs)
 
     @staticmethod
     def of(cut, cloths, margin: float = 1.3) -> Capacity:
-        def up(n):
-            return int(32 * np.ceil(margin * n / 32))
+        def up(n, k=32):
+            return int(k * np.ceil(margin * n / k))
 
+        band = max(_order(_edges(c.faces), len(c.cloth.vertices3d))[1] for c in cloths)
         return Capacity(
             up(len(cut.vertices)),
             up(max(len(c.cloth.vertices3d) for c in cloths)),
             up(max(len(_edges(c.faces)) for c in cloths)),
             up(max(len(c.faces) for c in cloths)),
+            up(2 * band + 2, 8),
         )
+
+
+def _order(edges: np.ndarray, n: int) -> tuple[np.ndarray, int]:
+    """Reverse Cuthill-McKee place of each of `n` vertices (scipy, at template
+    time) and the largest place difference across an edge (the bandwidth)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    a = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), (n, n))
+    perm = reverse_cuthill_mckee((a + a.T).tocsr(), symmetric_mode=True)
+    pos = np.empty(n, np.int64)
+    pos[perm] = np.arange(n)
+    band = int(np.max(np.abs(pos[edges[:, 0]] - pos[edges[:, 1]]), initial=0))
+    return pos, band
+
+
+def _gauge_pins(uv: np.ndarray) -> np.ndarray:
+    """Per vertex and coordinate 1, but 0 at the three coordinates a banded
+    solve holds fixed to remove the rigid motions: both of the vertex `p`
+    farthest from the centroid, and of the vertex `q` farthest from `p` the
+    coordinate along which a rotation about `p` moves it most."""
+    p = int(np.argmax(np.sum((uv - uv.mean(0)) ** 2, 1)))
+    q = int(np.argmax(np.sum((uv - uv[p]) ** 2, 1)))
+    dx, dy = uv[q] - uv[p]
+    free = np.ones_like(uv)
+    free[p] = 0.0
+    free[q, int(abs(dx) > abs(dy))] = 0.0  # rotation moves q along (-dy, dx)
+    return free
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
@@ -170,6 +214,8 @@ def make_template(
     fmask = np.zeros((C, cap.cloth_faces))
     uv0 = np.zeros((C, cap.cloth_vertices, 2))
     rot = np.zeros((C, 2, 2))
+    pos = np.tile(np.arange(cap.cloth_vertices), (C, 1))
+    free = np.ones((C, cap.cloth_vertices, 2))
     # the cut vertices as `evaluate` makes them at this layout
     src = np.concatenate(
         [np.asarray(mesh.vertices), np.asarray(paths.points).reshape(-1, 3)]
@@ -193,7 +239,11 @@ def make_template(
         ]
         faces[k, : len(f)] = f
         fmask[k, : len(f)] = 1.0
+        pos[k, :n], band = _order(e, n)
+        if 2 * band + 2 > cap.block:
+            raise JaxgeoError("a cloth's bandwidth outgrew the template's block")
         uv0[k, :n] = _converged(x3[c.vertex_ids], e, ew[k, : len(e)], c.uv)
+        free[k, :n] = _gauge_pins(uv0[k, :n])
         a = cc.warp_angle
         rot[k] = [[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]]
     t = Template(
@@ -207,6 +257,9 @@ def make_template(
             jnp.asarray(a)
             for a in (idx, w, verts, vmask, edges, ew, faces, fmask, uv0, rot)
         ),
+        pos=jnp.asarray(pos),
+        free=jnp.asarray(free),
+        blocks=jnp.zeros((-(-2 * cap.cloth_vertices // cap.block), cap.block)),
     )
     return t, cap
 
@@ -243,7 +296,9 @@ def _gauss_newton(name: str, n_vertices: int) -> optx.GaussNewton:
         # tolerance is set above it (a tighter one is never met)
         ls = lx.LSMR(rtol=1e-12, atol=1e-12, max_steps=4 * n_vertices)
         return optx.GaussNewton(rtol=1e-8, atol=1e-10, linear_solver=ls)
-    raise JaxgeoError(f"unknown flattening solver {name!r}; use sparse, qr or lsmr")
+    raise JaxgeoError(
+        f"unknown flattening solver {name!r}; use banded, sparse, qr or lsmr"
+    )
 
 
 def _gauge(uv0, vmask):
@@ -268,14 +323,20 @@ def _residuals(u, L, sw, edges, vmask, uv0):
     return r_e, pins, c / scale, rotn / scale
 
 
-def _flatten(x3, edges, ew, vmask, uv0, solver="sparse"):
+def _flatten(x3, edges, ew, vmask, uv0, solver="banded", band=None):
     """Least edge-length strain flattening of one padded cloth, differentiated
     implicitly in `x3` (through the optimality condition, not the iterations):
-    by `_implicit` for solver "sparse", by optimistix's adjoint otherwise."""
+    by `_implicit` for solvers "banded" and "sparse", by optimistix's adjoint
+    otherwise. `band`: `(pos, free, shape)` of the banded solve (`Template`)."""
     i, j = edges[:, 0], edges[:, 1]
     L = _safe_norm(x3[i] - x3[j])
     sw = jnp.sqrt(ew) / jnp.where(ew > 0, L, 1.0)
     uv0 = jax.lax.stop_gradient(uv0)
+    if solver == "banded":
+        if band is None:
+            raise JaxgeoError("the banded flattening needs the template's band")
+        u, ok = _jax_newton(*jax.lax.stop_gradient((L, sw)), edges, vmask, uv0, *band)
+        return _implicit(solver, u, L, sw, edges, vmask, uv0, *band), ok
     if solver == "sparse":
         shapes = (
             jax.ShapeDtypeStruct(uv0.shape, uv0.dtype),
@@ -290,7 +351,8 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="sparse"):
             uv0,
             vmap_method="sequential",
         )
-        return _implicit(u, L, sw, edges, vmask, uv0), ok
+        z = jnp.zeros(0)
+        return _implicit(solver, u, L, sw, edges, vmask, uv0, z, z, z), ok
 
     def residuals(u, args):
         L, sw = args
@@ -305,6 +367,255 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="sparse"):
         throw=False,
     )
     return sol.value, sol.result == optx.RESULTS.successful
+
+
+# ------------------------------------------- the banded flattening (JAX native)
+# The same Newton iteration as `_host_newton`, in JAX with fixed shapes (jit,
+# vmap, grad; GPU as CPU). The edge part of the system (Gauss-Newton J^T J or
+# the Hessian) couples the two ends of an edge only; in each cloth's reverse
+# Cuthill-McKee order (`_order`) it is banded, so it is stored as block-
+# tridiagonal (blocks of `Capacity.block` >= its bandwidth) and factored by a
+# block Cholesky, one `lax.scan` over the blocks: O(n b^2) flops for n dofs
+# and block b, where a dense Cholesky takes O(n^3) (1.7 s for the twin-peak
+# tent's 16 cloths of 1408 dofs on 2 cores). The dense rank-3 gauge rows
+# B^T B would fill the band, so the solve of (H + B^T B) y = b uses that H's
+# null space is the rigid motions N (exactly for J^T J; for the Hessian at the
+# optimum): z = (B N)^-T N^T b, H x = b - B^T z solved with three coordinates
+# held at zero (`Template.free`: a particular solution, H's null space
+# removed), then y = x + N (B N)^-1 (z - B x).
+
+
+def _energy(u, L, sw, edges, vmask, uv0):
+    r = _residuals(u, L, sw, edges, vmask, uv0)
+    return 0.5 * sum(jnp.sum(x * x) for x in r)
+
+
+def _rigid(u, vmask):
+    """The rigid motions at `u` (x, y translation, rotation about the
+    centroid), `(3, Vc, 2)`, zero on padded vertices."""
+    nv = jnp.sum(vmask)
+    c = jnp.sum(u * vmask[:, None], 0) / nv
+    one, zero = vmask, jnp.zeros_like(vmask)
+    rot = jnp.stack([-(u[:, 1] - c[1]), u[:, 0] - c[0]], 1) * vmask[:, None]
+    return jnp.stack([jnp.stack([one, zero], 1), jnp.stack([zero, one], 1), rot])
+
+
+def _gauge_rows(uv0, vmask):
+    """The gauge residuals' rows B `(3, Vc, 2)` (linear in u, `_residuals`)."""
+    nv, _, r0, scale = _gauge(uv0, vmask)
+    zero = jnp.zeros_like(vmask)
+    b0 = vmask / (nv * scale)
+    return jnp.stack(
+        [
+            jnp.stack([b0, zero], 1),
+            jnp.stack([zero, b0], 1),
+            jnp.stack([-r0[:, 1], r0[:, 0]], 1) / scale**2,
+        ]
+    )
+
+
+def _band_matrix(u, L, sw, edges, vmask, pos, free, nblk, nb, full):
+    """The edge part of the system (Gauss-Newton, or with `full` the Hessian
+    of the edge terms), pins of padded vertices and identity rows at the held
+    coordinates, in block-tridiagonal form: diagonal blocks `(nblk, nb, nb)`
+    and the blocks below them `(nblk - 1, nb, nb)`, in reordered dofs."""
+    i, j = edges[:, 0], edges[:, 1]
+    d = u[i] - u[j]
+    dn = _safe_norm(d)
+    nrm = d / dn[:, None]
+    nn = nrm[:, :, None] * nrm[:, None, :]
+    s2 = sw * sw
+    blk = s2[:, None, None] * nn
+    t = jnp.where(full, s2 * (dn - L) / dn, 0.0)
+    blk = blk + t[:, None, None] * (jnp.eye(2) - nn)
+    # the four node pairs of an edge, +blk on (i,i), (j,j), -blk on (i,j), (j,i)
+    a = jnp.stack([i, j, i, j], 1)  # (E, 4)
+    b = jnp.stack([i, j, j, i], 1)
+    sign = jnp.array([1.0, 1.0, -1.0, -1.0])
+    k2 = jnp.arange(2)
+    shp = (len(i), 4, 2, 2)
+    rows = jnp.broadcast_to(2 * pos[a][:, :, None, None] + k2[:, None], shp)
+    cols = jnp.broadcast_to(2 * pos[b][:, :, None, None] + k2[None, :], shp)
+    fr = free[a][:, :, :, None] * free[b][:, :, None, :]
+    vals = sign[:, None, None] * blk[:, None] * fr
+    # diagonal: pins of padded vertices, 1 at held coordinates and beyond 2 Vc
+    n = pos.shape[0]
+    dof = (2 * pos[:, None] + k2).ravel()
+    dval = ((1.0 - vmask)[:, None] * free + (1.0 - free)).ravel()
+    rows = jnp.concatenate([rows.ravel(), dof, jnp.arange(2 * n, nblk * nb)])
+    cols = jnp.concatenate([cols.ravel(), dof, jnp.arange(2 * n, nblk * nb)])
+    vals = jnp.concatenate([vals.ravel(), dval, jnp.ones(nblk * nb - 2 * n)])
+    br, bc = rows // nb, cols // nb
+    rr, cc = rows % nb, cols % nb
+    diag = (
+        jnp.zeros((nblk, nb, nb))
+        .at[jnp.where(br == bc, br, nblk), rr, cc]
+        .add(vals, mode="drop")
+    )
+    low = jnp.zeros((nblk - 1, nb, nb)).at[jnp.where(br == bc + 1, bc, nblk), rr, cc]
+    low = low.add(vals, mode="drop")
+    return diag, low
+
+
+def _band_factor(diag, low):
+    """Block Cholesky of a symmetric block-tridiagonal matrix: the inverses of
+    the diagonal factors `Lk^-1` and `Wk = E_k Lk^-T` (NaN where it is not
+    positive definite). The inverses make every solve matrix products: one
+    triangular solve per block here and none in `_band_solve` (jaxlib's
+    batched trsm calls, not their flops, dominated on the loaded 2-core CPU)."""
+    tri = jax.scipy.linalg.solve_triangular
+    eye = jnp.eye(diag.shape[-1])
+    i0 = tri(jnp.linalg.cholesky(diag[0]), eye, lower=True)
+
+    def step(ik, xs):
+        e, dk1 = xs
+        w = e @ ik.T
+        ik1 = tri(jnp.linalg.cholesky(dk1 - w @ w.T), eye, lower=True)
+        return ik1, (w, ik1)
+
+    _, (w, inv) = jax.lax.scan(step, i0, (low, diag[1:]))
+    return jnp.concatenate([i0[None], inv]), w
+
+
+def _band_solve(fac, rhs):
+    """Solve with `_band_factor`'s factors; `rhs` `(nblk, nb)`."""
+    inv, w = fac
+    y0 = inv[0] @ rhs[0]
+
+    def fwd(y, xs):
+        i1, wk, b1 = xs
+        y1 = i1 @ (b1 - wk @ y)
+        return y1, y1
+
+    _, ys = jax.lax.scan(fwd, y0, (inv[1:], w, rhs[1:]))
+    ys = jnp.concatenate([y0[None], ys])
+    xl = inv[-1].T @ ys[-1]
+
+    def bwd(x, xs):
+        i0, wk, y0 = xs
+        x0 = i0.T @ (y0 - wk.T @ x)
+        return x0, x0
+
+    _, xs = jax.lax.scan(bwd, xl, (inv[:-1], w, ys[:-1]), reverse=True)
+    return jnp.concatenate([xs, xl[None]])
+
+
+def _system_matvec(u, L, sw, edges, vmask, uv0, full, v):
+    """The system's matrix times `v`: the Hessian of E (`full`) or J^T J."""
+
+    def res(u):
+        return jnp.concatenate(
+            [x.ravel() for x in _residuals(u, L, sw, edges, vmask, uv0)]
+        )
+
+    hv = jax.jvp(lambda u: jax.grad(_energy)(u, L, sw, edges, vmask, uv0), (u,), (v,))
+    jv = jax.jvp(res, (u,), (v,))[1]
+    (gn,) = jax.vjp(res, u)[1](jv)
+    return jnp.where(full, hv[1], gn)
+
+
+def _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, full, b):
+    """(H + B^T B + pins) y = b, H the edge part at `u` (module comment above
+    `_energy`), and one step of iterative refinement with the exact product
+    (`_system_matvec`): the held coordinates give the exact solve only where
+    H's null space is the rigid motions (J^T J; the Hessian at the optimum),
+    so a Newton step near it is exact to second order. `shape` `(nblk, nb)`
+    carries the block sizes."""
+    nblk, nb = shape.shape
+    fac = _band_factor(*_band_matrix(u, L, sw, edges, vmask, pos, free, nblk, nb, full))
+    n = pos.shape[0]
+    live = vmask[:, None]
+    nmat = _rigid(u, vmask).reshape(3, -1)  # (3, 2n)
+    bmat = _gauge_rows(uv0, vmask).reshape(3, -1)
+    bn = bmat @ nmat.T  # (3, 3)
+    order = (2 * pos[:, None] + jnp.arange(2)).ravel()
+
+    def apply(b):
+        bf = b.reshape(-1)
+        z = jnp.linalg.solve(bn.T, nmat @ bf)
+        rhs = ((bf - bmat.T @ z).reshape(n, 2) * free * live).ravel()
+        # padded vertices: pins only, y = b there
+        rhs = rhs + (b * (1.0 - live)).ravel()
+        full_rhs = jnp.zeros(nblk * nb).at[order].set(rhs).reshape(nblk, nb)
+        x = _band_solve(fac, full_rhs).reshape(-1)[order]
+        c = jnp.linalg.solve(bn, z - bmat @ x)
+        return (x + nmat.T @ c).reshape(n, 2)
+
+    y = apply(b)
+    return y + apply(b - _system_matvec(u, L, sw, edges, vmask, uv0, full, y))
+
+
+def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
+    """`_host_newton` in JAX (`lax.while_loop`, fixed shapes): Gauss-Newton
+    steps with a backtracking Armijo line search; Newton steps (the Hessian)
+    once the last step was below `newton` times the cloth's size, where the
+    Hessian is positive definite and its step descends (else that iteration
+    falls back to Gauss-Newton, one step later). Same stopping tests as the
+    host. Returns (u, converged)."""
+
+    def energy(u):
+        return _energy(u, L, sw, edges, vmask, uv0)
+
+    def cond(st):
+        return ~st["done"] & (st["k"] < HOST_STEPS)
+
+    def body(st):
+        u = st["u"]
+        e0, g = jax.value_and_grad(energy)(u)
+        size = 1.0 + jnp.max(jnp.abs(u))
+        use_newton = (st["last"] < newton * size) & ~st["bad"]
+        du = -_system_solve(
+            u, L, sw, edges, vmask, uv0, pos, free, shape, use_newton, g
+        )
+        slope = jnp.sum(g * du)
+        finite = jnp.all(jnp.isfinite(du))
+        bad = use_newton & (~finite | ~(slope < 0))  # retry as Gauss-Newton
+        fail = ~use_newton & ~finite  # singular Gauss-Newton matrix
+        step = jnp.max(jnp.abs(du))
+        du = jnp.where(finite, du, 0.0)
+        new = u + du
+        e1 = energy(new)
+        conv = (
+            ~bad
+            & ~fail
+            & (step < GN_ATOL + GN_RTOL * jnp.max(jnp.abs(new)))
+            & (jnp.abs(e1 - e0) <= GN_RTOL * e0)
+        )
+
+        def ls_cond(c):
+            t, e = c
+            return (e > e0 + 1e-4 * t * slope) & (t >= 1e-8)
+
+        def ls_body(c):
+            t = 0.5 * c[0]
+            return t, energy(u + t * du)
+
+        t, _ = jax.lax.while_loop(ls_cond, ls_body, (jnp.asarray(1.0), e1))
+        stuck = t < 1e-8
+        small = step <= STALL_TOL * size
+        move = ~bad & ~fail & (conv | ~stuck)
+        u_next = jnp.where(conv, new, jnp.where(move, u + t * du, u))
+        done = fail | (~bad & (conv | stuck)) | ~jnp.isfinite(e0)
+        ok = ~fail & ~bad & (conv | (stuck & small)) & jnp.isfinite(e0)
+        return {
+            "u": u_next,
+            "k": st["k"] + 1,
+            "done": done,
+            "ok": ok,
+            "bad": bad,
+            "last": jnp.where(bad, st["last"], step),
+        }
+
+    st = {
+        "u": uv0,
+        "k": jnp.asarray(0),
+        "done": jnp.asarray(False),
+        "ok": jnp.asarray(False),
+        "bad": jnp.asarray(False),
+        "last": jnp.asarray(jnp.inf),
+    }
+    st = jax.lax.while_loop(cond, body, st)
+    return st["u"], st["ok"]
 
 
 # ------------------------------------------------- the sparse flattening (host)
@@ -457,24 +768,21 @@ def _host_hessian_solve(u, L, sw, edges, vmask, uv0, b):
     return _host_solve(A, B, np.asarray(b, np.float64).ravel()).reshape(b.shape)
 
 
-@jax.custom_jvp
-def _implicit(u, L, sw, edges, vmask, uv0):
+@partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _implicit(solver, u, L, sw, edges, vmask, uv0, pos, free, shape):
     """`u` (the flattening's optimum for `L`, `sw`), with the tangent of the
-    optimum: du = -H^-1 d(grad_u E)/d(L, sw) [dL, dsw], E = 1/2 |r|^2."""
+    optimum: du = -H^-1 d(grad_u E)/d(L, sw) [dL, dsw], E = 1/2 |r|^2; the
+    solve with H by `solver` ("banded": `_system_solve`; "sparse": the host)."""
     return u
 
 
 def _energy_grad(u, L, sw, edges, vmask, uv0):
-    def energy(u):
-        r = _residuals(u, L, sw, edges, vmask, uv0)
-        return 0.5 * sum(jnp.sum(x * x) for x in r)
-
-    return jax.grad(energy)(u)
+    return jax.grad(_energy)(u, L, sw, edges, vmask, uv0)
 
 
 @_implicit.defjvp
-def _implicit_jvp(primals, tangents):
-    u, L, sw, edges, vmask, uv0 = primals
+def _implicit_jvp(solver, primals, tangents):
+    u, L, sw, edges, vmask, uv0, pos, free, shape = primals
     _, dL, dsw, *_ = tangents
     _, rhs = jax.jvp(
         lambda L, sw: _energy_grad(u, L, sw, edges, vmask, uv0), (L, sw), (dL, dsw)
@@ -486,6 +794,8 @@ def _implicit_jvp(primals, tangents):
         ]
 
     def solve(_, b):
+        if solver == "banded":
+            return _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, True, b)
         return jax.pure_callback(
             _host_hessian_solve,
             jax.ShapeDtypeStruct(b.shape, b.dtype),
@@ -534,9 +844,10 @@ def evaluate(
     cw, cf = s.compensation
     shrink = jnp.array([1.0 / (1.0 + cw), 1.0 / (1.0 + cf)])
 
-    def cloth(verts, vmask, edges, ew, faces, fmask, uv0, rot):
+    def cloth(verts, vmask, edges, ew, faces, fmask, uv0, rot, pos, free):
         xc = x3[verts]
-        u, ok = _flatten(xc, edges, ew, vmask, uv0, s.solver)
+        band = (pos, free, t.blocks)
+        u, ok = _flatten(xc, edges, ew, vmask, uv0, s.solver, band)
         cutuv = (u @ rot.T) * shrink
         # padded faces get a unit right triangle on both sides (zero strain)
         unit2 = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
@@ -560,7 +871,7 @@ def evaluate(
         return d, area, width, length, ok
 
     d, area, width, length, ok = jax.vmap(cloth)(
-        t.verts, t.vmask, t.edges, t.ew, t.faces, t.fmask, t.uv0, t.rot
+        t.verts, t.vmask, t.edges, t.ew, t.faces, t.fmask, t.uv0, t.rot, t.pos, t.free
     )
     total = jnp.sum(area)
     rms = jnp.sqrt(jnp.sum(area * d**2) / total)
