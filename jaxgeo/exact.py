@@ -655,7 +655,7 @@ def exact_solve(
     end: SurfacePoint,
     *,
     max_points: int,
-    max_starts: int = 4,
+    max_starts: int = 8,
     max_iterations: int = 256,
     corridor_capacity: int | None = None,
     detours: int = 16,

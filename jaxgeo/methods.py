@@ -32,13 +32,14 @@ class Exact(eqx.Module):
     corridors round the other side of the best path's nearest cone vertices and,
     with `walls`, 8 corridors moved across a stretch of one of its walls
     (`detour_rounds` times); the shortest kept. Length and points differentiable.
-    `walls=False, detour_rounds=1` is ~1.8x faster per single path and misses the
-    shortest path more often on scanned meshes (`docs/accuracy.md`).
+    `max_starts=4` is ~1.5x faster per single path (~1.7x per path of a batch), and
+    `walls=False, detour_rounds=1` ~1.8x more; both miss the shortest path more
+    often on scanned meshes (`docs/accuracy.md`).
     The default method. `corridor_capacity`: faces a corridor may hold (None:
     `max_points`; `shortest_path` and `shortest_paths` then try 256 first, see
     `first_attempt`)."""
 
-    max_starts: int = 4
+    max_starts: int = 8
     max_iterations: int = 256
     detours: int = 16
     detour_rounds: int = 2
