@@ -56,10 +56,10 @@ def test_twin_peak_optimisation_fits_the_roll():
 def test_old_modules_re_export_the_cutting_modules_names():
     """`jaxgeo.seams` and `jaxgeo.pattern` are re-export modules: every public
     name they list is the very object of its `jaxgeo.cutting` module."""
-    from jaxgeo import pattern
+    from jaxgeo import boundary, pattern
     from jaxgeo.cutting import cut, flatten, layout, seam_width
 
-    homes = (layout, cut, flatten, seam_width, jg.boundary)
+    homes = (layout, cut, flatten, seam_width, boundary)
     for old in (seams, pattern):
         for name in old.__all__:
             obj = getattr(old, name)
