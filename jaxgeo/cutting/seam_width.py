@@ -32,6 +32,11 @@ BFGS with Armijo backtracking run as a Python loop (`optimise`), not
 compiled loop costs another ~40 s of compilation per mesh and its line search
 assumes a smooth function; the outer loop reuses the two compiled pieces (trace,
 replay-gradient) and rejects steps that cross seams or fail to trace.
+Driving `optimistix.BFGS` step by step from Python instead (`init`/`step`, the
+evaluator behind `jax.custom_jvp` + `jax.pure_callback`) works, but its `step`
+compiles for 15–23 s (jitted or not) where this loop compiles nothing
+(`benchmarks/seam_width_bfgs.py`; docs/architecture.md, "Modules with several
+jobs").
 
 (Moved here from `jaxgeo.seams`, which still re-exports the public names. The
 stress objective and its optimiser are `jaxgeo.cutting.objective` and
