@@ -1,5 +1,11 @@
 """jaxgeo: differentiable geodesics on triangle meshes, in JAX."""
 
+# `cutting` is imported before anything can import `seams` or `pattern`: those two
+# re-export names of `cutting`'s modules, and `cutting/__init__` imports modules
+# that still import from them (`cutting.compensate`, `cutting.optimise`). Imported
+# first, `cutting` finishes them during its own import; imported from `seams`
+# first, it would meet a half-initialised `seams`.
+from . import cutting as cutting
 from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._errors import JaxgeoError as JaxgeoError
 from ._precision import PrecisionWarning as PrecisionWarning

@@ -1,6 +1,6 @@
 """Export of cutting patterns: DXF (ezdxf), SVG, and seams as OBJ polylines.
 
-`write_dxf` and `write_svg` take either a `pattern.Pattern` (written without
+`write_dxf` and `write_svg` take either a `cutting.flatten.Pattern` (written without
 compensation, warp along each cloth's strip of least width, the same allowance on
 welds and boundaries) or a list of `cutting.fabricate.Piece` (compensated cut
 pieces). The writers and the layer list are in `jaxgeo.cutting.export`: one
@@ -16,8 +16,8 @@ import numpy as np
 from .cutting.compensate import compensate_pattern
 from .cutting.export import LAYERS, write_dxf as _write_dxf, write_svg as _write_svg
 from .cutting.fabricate import Piece, make_pieces
+from .cutting.flatten import Pattern
 from .cutting.material import Compensation
-from .pattern import Pattern
 
 __all__ = [
     "LAYERS",
