@@ -1,10 +1,7 @@
 """jaxgeo: differentiable geodesics on triangle meshes, in JAX."""
 
-# `cutting` is imported before anything can import `seams` or `pattern`: those two
-# re-export names of `cutting`'s modules, and `cutting/__init__` imports modules
-# that still import from them (`cutting.compensate`, `cutting.optimise`). Imported
-# first, `cutting` finishes them during its own import; imported from `seams`
-# first, it would meet a half-initialised `seams`.
+# (`seams` and `pattern` only re-export names of `cutting`'s modules, which import
+# nothing from them; `tests/test_seams.py` imports them first in a fresh interpreter.)
 from . import cutting as cutting
 from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._errors import JaxgeoError as JaxgeoError

@@ -130,20 +130,23 @@ def _usage(msg: str) -> int:
 def run_pattern(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import seams as sm
     from .._errors import JaxgeoError
+    from ..boundary import boundary_loops
     from ..cutting import (
         Compensation,
         Material,
         Prestress,
         Settings,
         compensate_pattern,
+        layout as lay,
         optimise_seams,
         reassemble,
     )
+    from ..cutting.cut import cut as cut_layout
     from ..cutting.export import write_dxf, write_svg
     from ..cutting.fabricate import make_pieces, weld_mismatch
     from ..cutting.plots import deviation_figure
+    from ..cutting.seam_width import fit_roll
     from ..export import write_seams_obj
     from ..mesh import load_mesh
 
@@ -166,16 +169,16 @@ def run_pattern(args: argparse.Namespace) -> int:
         mesh = load_mesh(args.mesh)
     except (JaxgeoError, OSError, ValueError) as e:
         return _usage(f"cannot read {args.mesh}: {e}")
-    loops = sm.boundary_loops(mesh)
+    loops = boundary_loops(mesh)
     log(f"{args.mesh}: {mesh.n_faces} faces, {len(loops)} boundary loops")
     if len(loops) == 1:
-        layout = sm.parallel_layout(mesh, args.seams, args.direction)
+        layout = lay.parallel_layout(mesh, args.seams, args.direction)
     elif len(loops) == 2:
-        layout = sm.radial_layout(mesh, args.seams)
+        layout = lay.radial_layout(mesh, args.seams)
     elif len(loops) == 3:
         xs = np.asarray(mesh.vertices)[:, 0]
         half = 0.1 * (xs.max() - xs.min())
-        layout = sm.peaks_layout(mesh, args.seams, args.valley, half)
+        layout = lay.peaks_layout(mesh, args.seams, args.valley, half)
     else:
         return _usage(
             f"need a membrane with 1, 2 or 3 boundary loops, {args.mesh} has "
@@ -183,7 +186,7 @@ def run_pattern(args: argparse.Namespace) -> int:
         )
     log(f"{layout.n_seams} seams; tracing (the first call compiles, ~40 s)")
     if args.objective == "width":
-        first, layout, pat, history = sm.fit_roll(
+        first, layout, pat, history = fit_roll(
             mesh,
             layout,
             args.roll_width,
@@ -196,9 +199,9 @@ def run_pattern(args: argparse.Namespace) -> int:
         j_start = first.j_start
         rounds = [{"objective": j, "widest": w} for j, w in history]
         j_end = history[-1][0] if history else j_start
-        cut, paths = sm.cut(mesh, layout, method=args.method)
+        cut, paths = cut_layout(mesh, layout, method=args.method)
     else:
-        from ..pattern import make_pattern
+        from ..cutting.flatten import make_pattern
 
         settings = Settings(
             material,
@@ -215,7 +218,7 @@ def run_pattern(args: argparse.Namespace) -> int:
             print(f"jaxgeo pattern: {e}", file=sys.stderr)
             return 1
         layout, j_start, j_end, rounds = res.layout, res.j_start, res.j_end, res.rounds
-        cut, paths = sm.cut(mesh, layout, method=args.method)
+        cut, paths = cut_layout(mesh, layout, method=args.method)
         pat = make_pattern(cut)
     polylines = [
         np.asarray(paths.points[i])[: int(paths.count[i])]

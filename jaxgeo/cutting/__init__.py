@@ -2,7 +2,10 @@
 warp direction, allowances and export, the reassembly stress check, the
 differentiable seam objective and its optimiser, and force-density form finding.
 
-One job per module: `material` (orthotropic membrane, prestress, compensation),
+One job per module: `layout` (seam layouts and their tracing), `cut` (the mesh cut
+along the seams), `flatten` (LSCM and the strain fit: cloths), `seam_width` (the
+roll-width objective and its BFGS), `material` (orthotropic membrane, prestress,
+compensation),
 `compensate` (warp frame and cut shape), `reassembly` (CST stress check),
 `fabricate` (allowances, weld matching, DXF/SVG), `formfinding` (force density),
 `objective` and `optimise` (the differentiable loop), `plots` (figures).

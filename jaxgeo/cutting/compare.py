@@ -22,16 +22,18 @@ import time
 
 import numpy as np
 
-from .. import seams as sm
 from ..mesh import Mesh
 from ..methods import Method
-from ..pattern import make_pattern
 from ..trace import TraceOptions
+from . import layout as lay
 from .compensate import compensate_pattern
+from .cut import cut as cut_layout
+from .flatten import make_pattern
 from .material import Compensation, Material, Prestress
 from .objective import Settings
 from .optimise import optimise_seams
 from .reassembly import reassemble
+from .seam_width import fit_roll
 
 MATERIAL = Material(600.0, 400.0, 0.3, 30.0)
 PRESTRESS = Prestress(2.0, 1.5)
@@ -41,7 +43,7 @@ PRESTRESS = Prestress(2.0, 1.5)
 class Case:
     name: str
     mesh: Mesh
-    layout: sm.Layout
+    layout: lay.Layout
     roll_width: float
 
 
@@ -55,16 +57,16 @@ def cases() -> list[Case]:
 
     tent = load_mesh(example_mesh_path("twin_peak_tent"))
     sail = Mesh(*surfaces.four_point_sail())
-    peaks = sm.peaks_layout(tent, 7, 3, 0.4, sector=172)
+    peaks = lay.peaks_layout(tent, 7, 3, 0.4, sector=172)
     return [
         Case("twin-peak tent", tent, peaks, 0.75),
-        Case("four-point sail", sail, sm.parallel_layout(sail, 4), 2.5),
+        Case("four-point sail", sail, lay.parallel_layout(sail, 4), 2.5),
     ]
 
 
 def measure(mesh, layout, compensation: Compensation, method: Method) -> dict:
     """Stress deviation (max, RMS; kN/m) and widest cloth of `layout`'s pattern."""
-    cut, _ = sm.cut(mesh, layout, TraceOptions("local", 160), method)
+    cut, _ = cut_layout(mesh, layout, TraceOptions("local", 160), method)
     pat = make_pattern(cut)
     cloths = compensate_pattern(pat, compensation)
     total = reassemble(cloths, MATERIAL, PRESTRESS).total_stats()
@@ -98,7 +100,7 @@ def run(
         uniform = measure(c.mesh, c.layout, comp, method)
         log(f"  uniform {uniform} ({time.time() - t:.0f} s)")
         t = time.time()
-        _, lw, _, _ = sm.fit_roll(
+        _, lw, _, _ = fit_roll(
             c.mesh, c.layout, c.roll_width, rounds=rounds, steps=steps, method=method
         )
         width = measure(c.mesh, lw, comp, method)

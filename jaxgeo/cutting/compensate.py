@@ -29,7 +29,7 @@ import scipy.sparse.linalg as spla
 from jaxtyping import Float, Int
 
 from .._errors import JaxgeoError
-from ..pattern import Cloth, Pattern
+from .flatten import Cloth, Pattern
 from .material import Compensation
 
 __all__ = [

@@ -175,7 +175,7 @@ def _gauge_pins(uv: np.ndarray) -> np.ndarray:
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
-    from ..pattern import edge_table
+    from .cut import edge_table
 
     return edge_table(faces)[0]
 

@@ -37,8 +37,8 @@ from jaxtyping import Array, Float
 
 from .._errors import JaxgeoError
 from ..mesh import Mesh
-from ..seams import Layout
 from .compensate import compensate_pattern
+from .layout import Layout
 from .material import Compensation
 from .objective import Settings, Template, evaluate, make_template
 
@@ -123,9 +123,9 @@ def _minimise(
 
 
 def _template(mesh, layout, settings, capacity):
-    from ..pattern import make_pattern
-    from ..seams import cut
     from ..trace import TraceOptions
+    from .cut import cut
+    from .flatten import make_pattern
 
     options = TraceOptions(candidates="local", max_points=settings.max_points)
     c, paths = cut(mesh, layout, options, settings.method)
