@@ -143,6 +143,19 @@ def _band(edges, ew, vmask, uv0):
     return jnp.asarray(pos), jnp.asarray(free), shape
 
 
+def _assert_jvp_vjp(f, x3, dx, w, jvp):
+    """`jvp` (of `f` at `x3` along `dx`) against central differences (step 1e-6:
+    truncation ~1e-12 of the cloth's size 1, roundoff ~1e-10 / 1e-6; the bound
+    1e-6 relative), and the VJP with `w` consistent with it to rounding."""
+    h = 1e-6
+    fd = (f(x3 + h * dx) - f(x3 - h * dx)) / (2 * h)
+    assert float(jnp.max(jnp.abs(jvp - fd))) <= 1e-6 * float(jnp.max(jnp.abs(fd)))
+    (vjp,) = jax.vjp(f, x3)[1](w)
+    assert abs(float(jnp.sum(vjp * dx) - jnp.sum(w * jvp))) <= 1e-10 * float(
+        jnp.sum(jnp.abs(w * jvp))
+    )
+
+
 def test_banded_flattening_matches_the_host_and_qr_and_its_derivative():
     """The JAX flattening (solver "banded", the default) reaches the optimum
     of the host Newton flattening ("sparse") and of optimistix's Gauss-Newton
@@ -176,13 +189,7 @@ def test_banded_flattening_matches_the_host_and_qr_and_its_derivative():
     _, jvp_host = jax.jvp(fs, (x3,), (dx,))
     # the same H^-1 b by two solvers: roundoff times H's condition (~1e3)
     assert float(jnp.max(jnp.abs(jvp - jvp_host))) <= 1e-10
-    h = 1e-6
-    fd = (f(x3 + h * dx) - f(x3 - h * dx)) / (2 * h)
-    assert float(jnp.max(jnp.abs(jvp - fd))) <= 1e-6 * float(jnp.max(jnp.abs(fd)))
-    (vjp,) = jax.vjp(f, x3)[1](w)
-    assert abs(float(jnp.sum(vjp * dx) - jnp.sum(w * jvp))) <= 1e-10 * float(
-        jnp.sum(jnp.abs(w * jvp))
-    )
+    _assert_jvp_vjp(f, x3, dx, w, jvp)
     # JAX only: the reverse-mode program of a batch holds no host callback
     batch = jnp.stack([x3, x3 + 1e-3 * dx])
     prog = jax.make_jaxpr(jax.vmap(jax.grad(lambda x: jnp.sum(f(x) * w))))(batch)
@@ -211,10 +218,4 @@ def test_sparse_flattening_matches_qr_and_its_derivative_the_differences():
     w = jnp.asarray(rng.normal(size=us.shape))
     f = jax.jit(lambda x: flat(x, "sparse")[0])
     _, jvp = jax.jvp(f, (x3,), (dx,))
-    h = 1e-6
-    fd = (f(x3 + h * dx) - f(x3 - h * dx)) / (2 * h)
-    assert float(jnp.max(jnp.abs(jvp - fd))) <= 1e-6 * float(jnp.max(jnp.abs(fd)))
-    (vjp,) = jax.vjp(f, x3)[1](w)
-    assert abs(float(jnp.sum(vjp * dx) - jnp.sum(w * jvp))) <= 1e-10 * float(
-        jnp.sum(jnp.abs(w * jvp))
-    )
+    _assert_jvp_vjp(f, x3, dx, w, jvp)
