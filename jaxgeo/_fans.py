@@ -10,10 +10,11 @@ vertex's fan is open: it starts at the face whose spoke a_0 is a boundary edge.
 - `fan_spokes[v, k] = a_k` (and, for an open fan of n faces, `fan_spokes[v, n] =
   b_{n-1}`): spoke k lies between faces k − 1 and k.
 - `corner_fan_pos[f, c]`: the position of face f in the fan of its corner c.
-- `boundary_next[v] = a_0` for a boundary vertex (an open fan), −1 for any other:
-  face 0 runs v → a_0 along the boundary edge (v, a_0), so following
-  `boundary_next` walks each boundary loop the way the faces are oriented (the
-  surface on the left, seen from the side the normals point to).
+- For a boundary vertex (an open fan) face 0 runs v → a_0 along the boundary
+  edge (v, a_0), so following `fan_spokes[v, 0]` from boundary vertex to
+  boundary vertex walks each boundary loop the way the faces are oriented (the
+  surface on the left, seen from the side the normals point to):
+  `Mesh.boundary_next`.
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ def vertex_fans(
     faces: np.ndarray, edge_faces: np.ndarray, face_edges: np.ndarray, n_vertices: int
 ) -> dict[str, np.ndarray]:
     """`fan_faces (V, K)`, `fan_spokes (V, K + 1)` (−1 padded), `fan_size (V,)`,
-    `fan_closed (V,)`, `corner_fan_pos (F, 3)` and `boundary_next (V,)` for a
-    validated manifold mesh."""
+    `fan_closed (V,)` and `corner_fan_pos (F, 3)` for a validated manifold mesh."""
     f = faces.astype(np.int64)
     n_faces = f.shape[0]
     corner_vertex = f.reshape(-1)
@@ -98,5 +98,4 @@ def vertex_fans(
         "fan_size": size.astype(np.int32),
         "fan_closed": closed,
         "corner_fan_pos": corner_pos.reshape(n_faces, 3).astype(np.int32),
-        "boundary_next": np.where(is_open, spokes[:, 0], -1).astype(np.int32),
     }

@@ -19,7 +19,7 @@ with every mesh of the same `SizeClass`:
 
 The padding is inert. Padded vertices sit at the centre of the mesh's bounding box
 (inside it: the trace's frame is unchanged) in no face's fan (`fan_size` 0,
-`vertex_faces` −1, off the boundary (`boundary_next` −1), landmark distance inf and
+`vertex_faces` −1, so off the boundary: `boundary_next` −1), landmark distance inf and
 predecessor −1; padded edges' predecessor −1), so no start or path reaches them.
 Padded faces are the point-like triangle (V, V, V) of the first padded vertex, with
 `face_component` −1 (`locate` skips them) and `face_edges` the first padded edge;
@@ -110,7 +110,6 @@ RULES: dict[str, tuple[tuple[str | None, ...], Any]] = {
     "fan_size": (("V",), 0),
     "fan_closed": (("V",), False),
     "corner_fan_pos": (("F", None), 0),
-    "boundary_next": (("V",), -1),
     "landmark_pred_vertex": ((None, "V"), -1),
     "landmark_pred_edge": ((None, "E"), -1),
     "landmark_dist": ((None, "V"), np.inf),

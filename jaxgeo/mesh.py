@@ -382,10 +382,11 @@ class Mesh(eqx.Module):
     - `mean_edge_length`: a scalar length scale (tolerances are relative to it).
     - `fan_faces`, `fan_spokes`, `fan_size`, `fan_closed`, `corner_fan_pos`: the
       faces and edges round every vertex in rotational order (`jaxgeo._fans`).
-    - `boundary_next`: `(V,)` for a boundary vertex the next vertex of its
-      boundary loop (the loop runs the way the faces are oriented), −1 for any
-      other vertex; `is_boundary_vertex` is `boundary_next >= 0`. The one record
-      of the boundary: `normals`, `trace` and `boundary` read it.
+      Read from them, `boundary_next` `(V,)` gives for a boundary vertex the next
+      vertex of its boundary loop (the loop runs the way the faces are
+      oriented), −1 for any other vertex, and `is_boundary_vertex` is
+      `boundary_next >= 0`: the one record of the boundary, which `normals`,
+      `trace` and `boundary` read.
     - `landmark_pred_vertex`, `landmark_pred_edge`, `landmark_dist`:
       shortest-path forests of `landmarks` landmark slots on the graph of vertices
       and edge midpoints, from which the exact method reads its starting paths
@@ -420,7 +421,6 @@ class Mesh(eqx.Module):
     fan_size: Int[Array, " V"]
     fan_closed: Bool[Array, " V"]
     corner_fan_pos: Int[Array, "F 3"]
-    boundary_next: Int[Array, " V"]
     landmark_pred_vertex: Int[Array, "M V"]
     landmark_pred_edge: Int[Array, "M E"]
     landmark_dist: Float[Array, "M V"]
@@ -459,7 +459,6 @@ class Mesh(eqx.Module):
         self.fan_size = jnp.asarray(fans["fan_size"])
         self.fan_closed = jnp.asarray(fans["fan_closed"])
         self.corner_fan_pos = jnp.asarray(fans["corner_fan_pos"])
-        self.boundary_next = jnp.asarray(fans["boundary_next"])
         vertex_component = np.where(
             fans["fan_size"] > 0, component[np.maximum(fans["fan_faces"][:, 0], 0)], -1
         )
@@ -486,6 +485,12 @@ class Mesh(eqx.Module):
     def boundary_edges(self) -> Int[Array, " B"]:
         """Indices of the edges with a single face (not jit-able: variable size)."""
         return jnp.flatnonzero(self.edge_faces[:, 1] < 0)
+
+    @property
+    def boundary_next(self) -> Int[Array, " V"]:
+        """For a boundary vertex the next vertex of its boundary loop, −1 for any
+        other (jit-able): the first spoke of an open fan (`jaxgeo._fans`)."""
+        return jnp.where(self.fan_closed, -1, self.fan_spokes[:, 0])
 
     @property
     def is_boundary_vertex(self) -> Bool[Array, " V"]:
