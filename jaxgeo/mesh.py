@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph  # noqa: F401
 import trimesh
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from scipy.sparse.csgraph import connected_components
 
 from ._errors import JaxgeoError
@@ -491,6 +491,10 @@ class Mesh(eqx.Module):
         """For a boundary vertex the next vertex of its boundary loop, −1 for any
         other (jit-able): the first spoke of an open fan (`jaxgeo._fans`)."""
         return jnp.where(self.fan_closed, -1, self.fan_spokes[:, 0])
+
+    def boundary_next_at(self, v: Int[ArrayLike, "*B"]) -> Int[Array, "*B"]:
+        """`boundary_next[v]`, reading only the rows of `v` (for loop bodies)."""
+        return jnp.where(self.fan_closed[v], -1, self.fan_spokes[v, 0])
 
     @property
     def is_boundary_vertex(self) -> Bool[Array, " V"]:

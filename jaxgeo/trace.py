@@ -370,7 +370,7 @@ def _boundary_slide(
     usable = jnp.repeat(star >= 0, 3) & (mesh.edge_faces[se, 1] < 0) & through
     # The head of each boundary edge in its face's orientation (the boundary
     # loop's next vertex after its tail).
-    forward = mesh.boundary_next[ends[:, 0]] == ends[:, 1]
+    forward = mesh.boundary_next_at(ends[:, 0]) == ends[:, 1]
     head = jnp.where(forward, ends[:, 1], ends[:, 0])
     w = ends.reshape(-1)
     way = jnp.where(w == jnp.repeat(head, 2), 1, -1)
@@ -416,7 +416,7 @@ def _mesh_angle(
     mesh, verts = ctx.mesh, ctx.verts
     pv = verts[v]
     size = mesh.fan_size[v]
-    forward = mesh.boundary_next[v] == out_vertex
+    forward = mesh.boundary_next_at(v) == out_vertex
     width = mesh.fan_faces.shape[1]
 
     def angle(a, b):
@@ -649,7 +649,7 @@ def _advance(
     on_boundary = jnp.where(
         ahead.cross_kind == EDGE,
         mesh.edge_faces[ahead.cross_idx, 1] < 0,
-        mesh.is_boundary_vertex[ahead.cross_idx],
+        mesh.boundary_next_at(ahead.cross_idx) >= 0,
     )
     new_dir = jnp.where(sliding, sl.way, s.slide_dir)
     new_dir = jnp.where(ahead.crossed & ~ahead.aiming & ~on_boundary, 0, new_dir)
