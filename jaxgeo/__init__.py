@@ -9,8 +9,9 @@ from ._precision import PrecisionWarning as PrecisionWarning
 from .batch import shortest_paths as shortest_paths
 from .data import example_mesh_path as example_mesh_path
 from .geodesic import path_length as path_length, shortest_path as shortest_path
+from .loading import load_mesh as load_mesh
 from .locate import SurfacePoint as SurfacePoint, locate as locate
-from .mesh import Mesh as Mesh, load_mesh as load_mesh
+from .mesh import Mesh as Mesh
 from .methods import Exact as Exact, Laser as Laser, Smooth as Smooth
 from .normals import vertex_normals as vertex_normals
 from .path import Path as Path, Status as Status

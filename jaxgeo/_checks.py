@@ -20,8 +20,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._errors import JaxgeoError
+from ._stacklevel import caller_stacklevel
 from .locate import SurfacePoint
-from .mesh import _caller_stacklevel
 
 #: The vertex-normal weightings of `jaxgeo.normals.vertex_normals`.
 WEIGHTINGS = ("uniform", "area", "angle")
@@ -274,7 +274,7 @@ def warn_if_coincident(name: str, points: np.ndarray, mesh) -> None:
         f"{', '.join(str(int(c.vertices[i])) for i in near)}{more}, which the mesh "
         "keeps apart: which of them the path starts from is arbitrary. Pass a "
         f"jaxgeo.SurfacePoint on the intended side instead, e.g. {hints}",
-        stacklevel=_caller_stacklevel(),
+        stacklevel=caller_stacklevel(),
     )
 
 

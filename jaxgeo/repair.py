@@ -44,13 +44,8 @@ import numpy as np
 from jaxtyping import Float, Int
 
 from ._errors import JaxgeoError
-from .mesh import (
-    _caller_stacklevel,
-    _check_arrays,
-    _corner_fans,
-    _degenerate_mask,
-    _unique_pairs,
-)
+from ._mesh_checks import check_arrays, corner_fans, degenerate_mask, unique_pairs
+from ._stacklevel import caller_stacklevel
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,7 +96,7 @@ class RepairReport:
 def _edge_counts(f: np.ndarray) -> np.ndarray:
     """For each face, the most faces any of its edges has."""
     half = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
-    _, edge, counts = _unique_pairs(half, return_inverse=True, return_counts=True)
+    _, edge, counts = unique_pairs(half, return_inverse=True, return_counts=True)
     return counts[edge.ravel()].reshape(3, -1).max(axis=0)
 
 
@@ -139,7 +134,7 @@ def _nonmanifold_excess(v: np.ndarray, f: np.ndarray) -> np.ndarray:
             axis=1,
         )
         face = np.tile(live, 3)
-        _, edge, counts = _unique_pairs(half, return_inverse=True, return_counts=True)
+        _, edge, counts = unique_pairs(half, return_inverse=True, return_counts=True)
         edge = edge.ravel()
         over = counts[edge] > 2
         if not over.any():
@@ -154,7 +149,7 @@ def _nonmanifold_excess(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 def _split_fans(f: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """One vertex per fan (the fan holding a vertex's first corner keeps its
     index): returns the faces and the input vertex of each appended copy."""
-    labels = _corner_fans(f)
+    labels = corner_fans(f)
     corner_vertex = f.ravel()
     # fans of each vertex, ordered by the fan's first corner
     first_corner = np.full(labels.max() + 1, labels.size)
@@ -201,9 +196,9 @@ def repair_mesh(
         raise JaxgeoError(
             f"nonmanifold must be 'split' or 'remove', not {nonmanifold!r}"
         )
-    v, f = _check_arrays(vertices, faces)
+    v, f = check_arrays(vertices, faces)
     kept = np.arange(f.shape[0])
-    degenerate = _degenerate_mask(v, f)
+    degenerate = degenerate_mask(v, f)
     kept = kept[~degenerate]
     if kept.size == 0:
         raise JaxgeoError(
@@ -227,5 +222,5 @@ def repair_mesh(
         faces=kept,
     )
     if warn and report.changed:
-        warnings.warn(f"repair_mesh: {report}", stacklevel=_caller_stacklevel())
+        warnings.warn(f"repair_mesh: {report}", stacklevel=caller_stacklevel())
     return out_v, out_f, report

@@ -17,7 +17,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 import jaxgeo as jg
 from jaxgeo._checks import _COINCIDENT, check_point, warn_if_coincident
 from jaxgeo._errors import JaxgeoError
-from jaxgeo.mesh import Mesh, load_mesh
+from jaxgeo.loading import load_mesh
+from jaxgeo.mesh import Mesh
 
 from .helpers import package_mesh
 

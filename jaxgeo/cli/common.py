@@ -28,7 +28,8 @@ def _default(name: str):
 def load_mesh_arg(mesh_arg: str | None):
     """(mesh, its name for the summary): the file MESH, or the built-in catenoid."""
     from .. import surfaces
-    from ..mesh import Mesh, load_mesh
+    from ..loading import load_mesh
+    from ..mesh import Mesh
 
     if mesh_arg is None:
         return Mesh(*surfaces.catenoid()), f"built-in {EXAMPLE}"

@@ -148,7 +148,7 @@ def run_pattern(args: argparse.Namespace) -> int:
     from ..cutting.plots import deviation_figure
     from ..cutting.seam_width import fit_roll
     from ..export import write_seams_obj
-    from ..mesh import load_mesh
+    from ..loading import load_mesh
 
     if args.seams < 1 or args.rounds < 1 or not args.roll_width > 0:
         return _usage("--seams and --rounds must be >= 1 and --roll-width > 0")

@@ -21,7 +21,7 @@ def _parameter(text: str) -> tuple[str, object]:
 
 def _cmd_surface(args: argparse.Namespace) -> int:
     from .. import surfaces
-    from ..mesh import load_mesh
+    from ..loading import load_mesh
 
     params = dict(args.params)
     out = args.output or f"{args.name}.obj"

@@ -53,7 +53,7 @@ def cases() -> list[Case]:
     run along mesh edges, where no step keeps the cut)."""
     from .. import surfaces
     from ..data import example_mesh_path
-    from ..mesh import load_mesh
+    from ..loading import load_mesh
 
     tent = load_mesh(example_mesh_path("twin_peak_tent"))
     sail = Mesh(*surfaces.four_point_sail())
