@@ -1,10 +1,12 @@
 """Phong vertex normals (eq. 8–9), a second-order fit for the normals at boundary
-vertices, and the normals' linear interpolation along an edge (eq. 10)."""
+vertices, the normals' linear interpolation along an edge (eq. 10), and the
+smooth method's choice of them (`phong_normals`)."""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Literal
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -239,3 +241,24 @@ def edge_normal(
     """Eq. (10): the normal at parameter `u` of an edge, `n1 + u (n2 − n1)`, linearly
     interpolated and, as in the paper, not renormalised."""
     return n1 + u * (n2 - n1)
+
+
+@eqx.filter_jit
+def phong_normals(
+    mesh: Mesh,
+    normals: Weighting | Float[Array, "V 3"] = "uniform",
+    boundary: Literal["fit", "keep"] = "fit",
+) -> Float[Array, "V 3"]:
+    """The unit vertex normals that define the Phong surface (see
+    `jaxgeo.smooth.smooth_geodesic`'s `normals` and `boundary`): a weighting's
+    normals (eq. 8–9 for `"uniform"`) or the given array, with the boundary
+    vertices' normals refitted to second order when `boundary="fit"`."""
+    if isinstance(normals, str):
+        nrm = vertex_normals(mesh.vertices, mesh.faces, normals)
+    else:
+        nrm = jnp.asarray(normals, mesh.vertices.dtype)
+    if boundary == "fit":
+        return fit_boundary_normals(mesh, nrm)
+    if boundary != "keep":
+        raise JaxgeoError(f"boundary must be 'fit' or 'keep', got {boundary!r}")
+    return nrm

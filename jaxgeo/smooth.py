@@ -43,6 +43,11 @@ on `stop_gradient` inputs and the optimal u* is `stop_gradient`-ed; the length i
 then re-evaluated from the live inputs. The crossing points' derivatives are
 likewise partial derivatives at fixed u* (not the total derivative of the
 crossings).
+
+This module is the entry points and their results; the strip and its length are
+`jaxgeo._smooth_strip`, the Newton solver `jaxgeo._smooth_newton`, the eager
+repair's host-side unfolding `jaxgeo._smooth_unfold`, the normals
+`jaxgeo.normals.phong_normals` (re-exported here).
 """
 
 from __future__ import annotations
@@ -55,12 +60,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from ._errors import JaxgeoError
-from ._numerics import safe_norm
-from ._phong import phong_point, phong_velocity, segment_length
-from .locate import SurfacePoint, snap
+from ._phong import phong_point
+from ._smooth_newton import minimise
+from ._smooth_strip import build_strip, lengths
+from ._smooth_unfold import fan_arcs, unfolded_crossings, vertex_fan
+from .locate import SurfacePoint
 from .mesh import Mesh
-from .normals import Weighting, fit_boundary_normals, vertex_normals
+from .normals import Weighting, phong_normals
 from .path import EDGE, FACE, VERTEX
 
 __all__ = [
@@ -111,302 +117,11 @@ class SmoothPath(eqx.Module):
     iterations: Int[Array, ""]
 
 
-# ----------------------------------------------------------------------- the strip
-
-
-class _Strip(eqx.Module):
-    """Per segment s (between nodes s and s+1): its face and the barycentric
-    coordinates of its ends in that face, affine in the node parameters,
-    b_start = a + u_s·b, b_end = c + u_{s+1}·d."""
-
-    face: Int[Array, " S"]
-    a: Float[Array, "S 3"]
-    b: Float[Array, "S 3"]
-    c: Float[Array, "S 3"]
-    d: Float[Array, "S 3"]
-    free: Bool[Array, " M"]
-    valid: Bool[Array, ""]
-
-
-def _star(mesh: Mesh, kind, index, width: int):
-    """Faces around an edge or vertex, padded with −1 to `width`."""
-
-    def pad(x):
-        return jnp.concatenate([x, jnp.full(width - x.shape[0], -1, x.dtype)])
-
-    edge = pad(mesh.edge_faces[index].astype(jnp.int32))
-    vertex = pad(mesh.vertex_faces[index].astype(jnp.int32))
-    return jnp.where(kind == EDGE, edge, vertex)
-
-
-def _build_strip(
-    mesh: Mesh,
-    start: SurfacePoint,
-    end: SurfacePoint,
-    kinds: Int[Array, " M"],
-    elements: Int[Array, " M"],
-    count: Int[Array, ""],
-    snap_tol: float,
-) -> _Strip:
-    m = kinds.shape[0]
-    dtype = mesh.vertices.dtype
-    idx = jnp.arange(m)
-    is_end = idx >= count - 1
-    kinds = jnp.where(idx == 0, FACE, jnp.where(is_end, FACE, kinds))
-    elements = jnp.where(
-        idx == 0, start.face, jnp.where(is_end, end.face, elements)
-    ).astype(jnp.int32)
-    bary = jnp.where(
-        (idx == 0)[:, None], jnp.asarray(start.bary), jnp.asarray(end.bary)
-    )
-    bary = bary.astype(dtype)
-
-    width = max(mesh.vertex_faces.shape[1], 2)
-
-    def node(kind, elem, bary):
-        e = mesh.edges[jnp.clip(elem, 0, mesh.n_edges - 1)]
-        fv = mesh.faces[jnp.clip(elem, 0, mesh.n_faces - 1)]
-        v = jnp.clip(elem, 0, mesh.n_vertices - 1)
-        minus = jnp.asarray(-1, jnp.int32)
-        vids = jnp.where(
-            kind == EDGE,
-            jnp.stack([e[0], e[1], minus]),
-            jnp.where(kind == VERTEX, jnp.stack([v, minus, minus]), fv),
-        ).astype(jnp.int32)
-        one = jnp.asarray([1.0, 0.0, 0.0], dtype)
-        base = jnp.where(kind == FACE, bary, one)
-        direction = jnp.where(
-            kind == EDGE, jnp.asarray([-1.0, 1.0, 0.0], dtype), jnp.zeros(3, dtype)
-        )
-        # vertices the node's face must contain
-        support = jnp.where(kind == FACE, bary > snap_tol, vids >= 0)
-        sp = SurfacePoint(jnp.clip(elem, 0, mesh.n_faces - 1), bary)
-        s_kind, s_idx = snap(mesh, sp, snap_tol)
-        own = jnp.where(kind == FACE, elem, -1).reshape(1).astype(jnp.int32)
-        star = jnp.where(
-            kind == FACE,
-            jnp.where(s_kind == FACE, -1, _star(mesh, s_kind, s_idx, width)),
-            _star(mesh, kind, elem, width),
-        )
-        return vids, base, direction, support, jnp.concatenate([own, star])
-
-    vids, base, direction, support, stars = jax.vmap(node)(kinds, elements, bary)
-
-    def segment(s):
-        cand = jnp.concatenate([stars[s], stars[s + 1]])
-        fv = mesh.faces[jnp.maximum(cand, 0)]  # (C, 3)
-
-        def contains(n):  # (C,) does the candidate hold node n's support
-            hit = jnp.any(vids[n][None, :, None] == fv[:, None, :], axis=2)
-            return jnp.all(hit | ~support[n][None, :], axis=1)
-
-        ok = (cand >= 0) & contains(s) & contains(s + 1)
-        face = cand[jnp.argmax(ok)]
-        corners = mesh.faces[jnp.maximum(face, 0)]
-
-        def match(n):  # (3 corners, 3 slots)
-            return (corners[:, None] == vids[n][None, :]).astype(dtype)
-
-        ms, me = match(s), match(s + 1)
-        return (
-            face,
-            ms @ base[s],
-            ms @ direction[s],
-            me @ base[s + 1],
-            me @ direction[s + 1],
-            jnp.any(ok),
-        )
-
-    face, a, b, c, d, ok = jax.vmap(segment)(jnp.arange(m - 1))
-    free = (kinds == EDGE) & (idx < count - 1)
-    return _Strip(face, a, b, c, d, free, jnp.all(ok))
-
-
-# ----------------------------------------------------------------------- the length
-
-
-def _face_data(faces, strip, vertices, normals):
-    fv = faces[strip.face]
-    return vertices[fv], normals[fv]
-
-
-def _lengths(faces, strip, vertices, normals, u, alpha, n_quad):
-    """Length of every segment, (S,)."""
-    corners, ns = _face_data(faces, strip, vertices, normals)
-    b0 = strip.a + u[:-1, None] * strip.b
-    b1 = strip.c + u[1:, None] * strip.d
-    return jax.vmap(segment_length, in_axes=(0, 0, 0, 0, None, None))(
-        corners, ns, b0, b1, alpha, n_quad
-    )
-
-
-def _derivatives(faces, strip, vertices, normals, u, alpha, n_quad):
-    """L, its gradient in u, the tridiagonal Hessian (diag, off), and per node the
-    one-sided growth rate of its adjacent zero-length segments (their kink)."""
-    corners, ns = _face_data(faces, strip, vertices, normals)
-
-    def seg(x, cs, nn, a, b, c, d):
-        return segment_length(cs, nn, a + x[0] * b, c + x[1] * d, alpha, n_quad)
-
-    def kink(x, cs, nn, a, b, c, d):
-        # a segment whose ends coincide grows like |∂X/∂u| when either end moves
-        b0, b1 = a + x[0] * b, c + x[1] * d
-        zero = jnp.max(jnp.abs(b1 - b0)) <= 1e-14
-
-        def rate(bb, dd):
-            return safe_norm(phong_velocity(cs, nn, bb, dd, alpha))
-
-        return jnp.where(zero, jnp.stack([rate(b0, b), rate(b1, d)]), 0.0)
-
-    x = jnp.stack([u[:-1], u[1:]], axis=1)
-    args = (corners, ns, strip.a, strip.b, strip.c, strip.d)
-
-    def all3(x, *args):
-        grad = jax.jacfwd(seg)
-        return seg(x, *args), grad(x, *args), jax.jacfwd(grad)(x, *args)
-
-    lens, grads, hess = jax.vmap(all3)(x, *args)
-    kinks = jax.vmap(kink)(x, *args)
-
-    def nodes(pair):  # (S, 2) per-segment ends → (M,) per node
-        zero = jnp.zeros(1, u.dtype)
-        return jnp.concatenate([pair[:, 0], zero]) + jnp.concatenate([zero, pair[:, 1]])
-
-    g = nodes(grads)
-    diag = nodes(jnp.stack([hess[:, 0, 0], hess[:, 1, 1]], axis=1))
-    return jnp.sum(lens), g, diag, hess[:, 0, 1], nodes(kinks)
-
-
-# ----------------------------------------------------------------------- the solver
-
-#: Parameters this close to 0 or 1 are put on the bound: a crossing pulled onto a
-#: vertex converges there quadratically, and the segments between crossings at the
-#: same vertex have zero length, where the length has a kink (|x| at 0) that a
-#: Newton step cannot resolve. On the bound, the projection holds it.
-_SNAP = 1e-10
-
-
-def _snap(u):
-    return jnp.where(u < _SNAP, 0.0, jnp.where(u > 1.0 - _SNAP, 1.0, u))
-
-
-def _tridiagonal_solve(diag, off, rhs):
-    """Thomas algorithm for the symmetric tridiagonal system (diag, off)·x = rhs
-    (no pivoting: used on damped, held-row-regularised Newton matrices; a
-    breakdown gives non-finite entries, which the caller rejects)."""
-
-    def forward(carry, xs):
-        c_prev, d_prev = carry
-        a, b, c, r = xs  # sub-diagonal, diagonal, super-diagonal, rhs
-        m = b - a * c_prev
-        c_new = c / m
-        d_new = (r - a * d_prev) / m
-        return (c_new, d_new), (c_new, d_new)
-
-    zero = jnp.zeros(1, diag.dtype)
-    sub = jnp.concatenate([zero, off])
-    sup = jnp.concatenate([off, zero])
-    init = (jnp.zeros((), diag.dtype), jnp.zeros((), diag.dtype))
-    _, (cp, dp) = jax.lax.scan(forward, init, (sub, diag, sup, rhs))
-
-    def backward(x_next, xs):
-        c, d = xs
-        x = d - c * x_next
-        return x, x
-
-    _, x = jax.lax.scan(backward, jnp.zeros((), diag.dtype), (cp, dp), reverse=True)
-    return x
-
-
-def _minimise(faces, strip, vertices, normals, u0, alpha, n_quad, gtol, max_steps):
-    """Projected Levenberg–Marquardt Newton on the tridiagonal Hessian.
-
-    Each iteration evaluates L, g, H at a trial point; the trial is accepted when
-    it is shorter (or level within rounding and flatter); then the next trial is
-    u + δ with (H + λ·|diag H|)·δ = −g on the free rows, clipped to [0, 1]."""
-    dtype = u0.dtype
-    eps = jnp.finfo(dtype).eps
-    free = strip.free
-
-    def projected(u, g, kink):
-        # at a bound, held when the one-sided derivative inwards is ≥ 0
-        held = ~free | ((u <= 0) & (g + kink >= 0)) | ((u >= 1) & (kink - g >= 0))
-        return held, jnp.where(held, 0.0, g)
-
-    def pg_norm(cur):
-        u, _, g, diag, _, kink = cur
-        pg = projected(u, g, kink)[1]
-        # A crossing whose Newton step |g|/H is below the rounding of u cannot
-        # move: the rest of its gradient is rounding (a path 1e-8 from a vertex has
-        # H ≈ 3e6, and stalled at |g| = 1e-10 on an 82k-face sphere).
-        pg = jnp.where(jnp.abs(pg) <= 4 * eps * jnp.abs(diag), 0.0, pg)
-        return jnp.max(jnp.abs(pg), initial=0.0)
-
-    def cond(state):
-        cur, _, _, it, n_fail = state
-        going = (pg_norm(cur) > gtol) & (it < max_steps) & (n_fail < 40)
-        return (it == 0) | going
-
-    def body(state):
-        cur, trial, lam, it, n_fail = state
-        new = (trial, *_derivatives(faces, strip, vertices, normals, trial, alpha,
-                                    n_quad))  # fmt: skip
-        first = it == 0
-        shorter = new[1] < cur[1]
-        level = new[1] <= cur[1] + 8 * eps * jnp.abs(cur[1])
-        flatter = pg_norm(new) < pg_norm(cur)
-        accept = first | (jnp.isfinite(new[1]) & (shorter | (level & flatter)))
-        cur = jax.tree.map(lambda a, b: jnp.where(accept, a, b), new, cur)
-        lam = jnp.where(
-            first, lam, jnp.where(accept, jnp.maximum(lam * 0.25, 1e-12), lam * 8.0)
-        )
-        u, _, g, diag, off, kink = cur
-        held, pg = projected(u, g, kink)
-        scale = jnp.maximum(jnp.abs(diag), jnp.finfo(dtype).tiny)
-        dd = jnp.where(held, 1.0, diag + lam * scale)
-        lo = jnp.where(held[1:] | held[:-1], 0.0, off)
-        step = _tridiagonal_solve(dd, lo, -pg)
-        step = jnp.where(held | ~jnp.isfinite(step), 0.0, step)
-        trial = jnp.where(free, _snap(jnp.clip(u + step, 0.0, 1.0)), u)
-        return cur, trial, lam, it + 1, jnp.where(accept, 0, n_fail + 1)
-
-    u0 = jnp.where(free, _snap(u0), u0)
-    m = u0.shape[0]
-    z = jnp.zeros(m, dtype)
-    cur = (u0, jnp.asarray(jnp.inf, dtype), z, z + 1, z[1:], z)
-    state = (cur, u0, jnp.asarray(1e-3, dtype), 0, 0)
-    cur, _, _, it, _ = jax.lax.while_loop(cond, body, state)
-    u = cur[0]
-    at_end = free & ((u <= 0) | (u >= 1))
-    return u, pg_norm(cur), jnp.any(at_end), it
-
-
 # ----------------------------------------------------------------------- entry point
 
 #: An endpoint this close (in barycentric coordinates) to an edge or vertex lies
 #: in every face round it when the strip's faces are chosen.
 _SNAP_TOL = 1e-12
-
-
-@eqx.filter_jit
-def phong_normals(
-    mesh: Mesh,
-    normals: Weighting | Float[Array, "V 3"] = "uniform",
-    boundary: Literal["fit", "keep"] = "fit",
-) -> Float[Array, "V 3"]:
-    """The unit vertex normals that define the Phong surface (see
-    `smooth_geodesic`'s `normals` and `boundary`): a weighting's normals (eq.
-    8–9 for `"uniform"`) or the given array, with the boundary vertices' normals
-    refitted to second order when `boundary="fit"`."""
-    if isinstance(normals, str):
-        nrm = vertex_normals(mesh.vertices, mesh.faces, normals)
-    else:
-        nrm = jnp.asarray(normals, mesh.vertices.dtype)
-    if boundary == "fit":
-        return fit_boundary_normals(mesh, nrm)
-    if boundary != "keep":
-        raise JaxgeoError(f"boundary must be 'fit' or 'keep', got {boundary!r}")
-    return nrm
 
 
 def smooth_geodesic(
@@ -483,18 +198,16 @@ def _solve(
     end = SurfacePoint(jnp.asarray(end.face), jnp.asarray(end.bary, dtype))
     snap_tol = _SNAP_TOL
     sg = jax.lax.stop_gradient
-    strip0 = _build_strip(
-        sg(mesh), sg(start), sg(end), kinds, elements, count, snap_tol
-    )
+    strip0 = build_strip(sg(mesh), sg(start), sg(end), kinds, elements, count, snap_tol)
     tol = gtol * sg(mesh.mean_edge_length)
-    u, gnorm, hit, it = _minimise(
+    u, gnorm, hit, it = minimise(
         mesh.faces, strip0, sg(mesh.vertices), sg(nrm), u0, alpha, n_quad, tol,
         max_steps,
     )  # fmt: skip
     u = sg(u)
     # Re-evaluate from the live inputs (envelope theorem).
-    strip = _build_strip(mesh, start, end, kinds, elements, count, snap_tol)
-    lens = _lengths(mesh.faces, strip, mesh.vertices, nrm, u, alpha, n_quad)
+    strip = build_strip(mesh, start, end, kinds, elements, count, snap_tol)
+    lens = lengths(mesh.faces, strip, mesh.vertices, nrm, u, alpha, n_quad)
     b0 = strip.a + u[:-1, None] * strip.b
     b_last = strip.c[-1] + u[-1] * strip.d[-1]
     fv = mesh.faces[strip.face]
@@ -532,127 +245,6 @@ def _capacity(n: int) -> int:
     """Buffer size for n interior nodes: a power of two (≥ 32), so that paths of
     similar length share one compiled shape."""
     return max(32, 1 << (n - 1).bit_length()) if n > 0 else 32
-
-
-def _fan(mesh_np: dict, v: int) -> tuple[list[int], list[int], bool]:
-    """Faces around vertex v in order, the edge between consecutive faces
-    (`edges[j]` joins `faces[j]` and `faces[j + 1]`, cyclically when closed), and
-    whether the fan is closed."""
-    faces, edge_faces, key = mesh_np["faces"], mesh_np["edge_faces"], mesh_np["key"]
-    n_v = mesh_np["n_vertices"]
-
-    def edge_id(a: int, b: int) -> int:
-        a, b = min(a, b), max(a, b)
-        return int(np.searchsorted(key, a * n_v + b))
-
-    def step(f: int, forward: bool) -> tuple[int, int]:
-        i = int(np.flatnonzero(faces[f] == v)[0])
-        w = faces[f, (i + 2) % 3] if forward else faces[f, (i + 1) % 3]
-        e = edge_id(v, int(w))
-        other = edge_faces[e, 0] if edge_faces[e, 0] != f else edge_faces[e, 1]
-        return int(other), e
-
-    start = int(mesh_np["vertex_faces"][v, 0])
-    order, between = [start], []
-    f = start
-    while True:
-        nxt, e = step(f, True)
-        if nxt == start:
-            between.append(e)
-            return order, between, True
-        if nxt < 0:
-            break
-        between.append(e)
-        order.append(nxt)
-        f = nxt
-    # open fan: walk backwards from the start to the other boundary edge
-    f = start
-    while True:
-        prv, e = step(f, False)
-        if prv < 0:
-            return order, between, False
-        order.insert(0, prv)
-        between.insert(0, e)
-        f = prv
-
-
-def _arcs(fan, f_in: int, f_out: int) -> list[list[int]]:
-    """The edge sequences leading around the vertex from face f_in to f_out, one per
-    side (one when the fan is open)."""
-    order, between, closed = fan
-    if f_in not in order or f_out not in order:
-        return []
-    i, o, m = order.index(f_in), order.index(f_out), len(order)
-    if not closed:
-        return [between[i:o] if i <= o else between[o:i][::-1]]
-    forward = [between[(i + j) % m] for j in range((o - i) % m)]
-    backward = [between[(i - 1 - j) % m] for j in range((i - o) % m)]
-    return [forward, backward]
-
-
-#: Rounding tolerance on the unfolded segment's parameter λ ∈ [0, 1].
-_UNFOLD_TOL = 1e-9
-
-
-def _unfolded_crossings(verts, faces, edges, v, arc, f_in, f_out, a, b):
-    """Parameters where the segment a → b, unfolded into the plane with the faces
-    of the fan of v from f_in across the edges `arc` to f_out, crosses those edges
-    (0.02 from v where it misses)."""
-
-    def other(e):
-        return int(edges[e, 1] if edges[e, 0] == v else edges[e, 0])
-
-    def corner(f, e1, e2):  # flat angle at v between edges e1, e2 of face f
-        d1, d2 = verts[other(e1)] - verts[v], verts[other(e2)] - verts[v]
-        return np.arctan2(np.linalg.norm(np.cross(d1, d2)), d1 @ d2)
-
-    def face_edge(f, not_e):  # the edge at v of face f other than not_e
-        w = [int(x) for x in faces[f] if x != v and x != other(not_e)][0]
-        lo, hi = min(v, w), max(v, w)
-        return int(np.flatnonzero((edges[:, 0] == lo) & (edges[:, 1] == hi))[0])
-
-    def place(p, f, e_known, angle_known, sign):
-        """2-D image of point p of face f, given edge e_known at angle_known; the
-        face's other edge at v lies at angle_known + sign·corner."""
-        e_other = face_edge(f, e_known)
-        alpha = corner(f, e_known, e_other)
-        d1 = verts[other(e_known)] - verts[v]
-        d2 = verts[other(e_other)] - verts[v]
-        st = np.linalg.lstsq(np.stack([d1, d2], 1), p - verts[v], rcond=None)[0]
-        t1, t2 = angle_known, angle_known + sign * alpha
-        return st[0] * np.linalg.norm(d1) * np.array([np.cos(t1), np.sin(t1)]) + st[
-            1
-        ] * np.linalg.norm(d2) * np.array([np.cos(t2), np.sin(t2)])
-
-    angles = [0.0]
-    faces_seq = [f_in]
-    for k in range(1, len(arc)):
-        shared = [
-            f
-            for f in set(np.flatnonzero((faces == v).any(1)).tolist())
-            if set(faces[f].tolist()) >= {v, other(arc[k - 1]), other(arc[k])}
-        ]
-        faces_seq.append(shared[0])
-        angles.append(angles[-1] + corner(shared[0], arc[k - 1], arc[k]))
-    a2 = place(a, f_in, arc[0], 0.0, -1.0)
-    b2 = place(b, f_out, arc[-1], angles[-1], 1.0)
-    out = []
-    for e, phi in zip(arc, angles):
-        ray = np.array([np.cos(phi), np.sin(phi)])
-        m = np.stack([b2 - a2, -ray], 1)
-        try:
-            lam, mu = np.linalg.solve(m, -a2)
-        except np.linalg.LinAlgError:
-            lam, mu = -1.0, -1.0
-        length = np.linalg.norm(verts[other(e)] - verts[v])
-        # closed segment, with rounding: when the next node is the far end of an
-        # arc edge (two vertex contacts in a row) the line ends exactly on that
-        # edge, at λ = 1 to rounding, and must count as crossing it there
-        hit = -_UNFOLD_TOL < lam < 1 + _UNFOLD_TOL and mu > 0
-        t = mu / length if hit else 0.02
-        t = float(np.clip(t, 1e-3, 1 - 1e-3))
-        out.append(t if edges[e, 0] == v else 1 - t)
-    return out
 
 
 def smooth_shortest_path(
@@ -756,12 +348,16 @@ def smooth_shortest_path(
         for j, node in enumerate(nodes):
             side = choice.get(j)
             f_in, f_out = int(seg_faces[j]), int(seg_faces[j + 1])
-            arcs = [] if side is None else _arcs(_fan(mesh_np, node[1]), f_in, f_out)
+            arcs = (
+                []
+                if side is None
+                else fan_arcs(vertex_fan(mesh_np, node[1]), f_in, f_out)
+            )
             if side is None or side >= len(arcs) or not arcs[side]:
                 out.append(node)
                 continue
             v, arc = node[1], arcs[side]
-            u0 = _unfolded_crossings(
+            u0 = unfolded_crossings(
                 verts, mesh_np["faces"], edges_np, v, arc, f_in, f_out,
                 flat(nodes, j - 1), flat(nodes, j + 1),
             )  # fmt: skip
@@ -797,13 +393,13 @@ def smooth_shortest_path(
 
 def _relax(mesh, nrm, start, end, kinds, elements, u0, count, alpha, n_quad, tol,
            max_steps):  # fmt: skip
-    """`_minimise` on a strip, nothing differentiated: `(u, length, ok, faces)`,
+    """`minimise` on a strip, nothing differentiated: `(u, length, ok, faces)`,
     ok = converged on a valid strip."""
-    strip = _build_strip(mesh, start, end, kinds, elements, count, _SNAP_TOL)
-    u, gnorm, _, _ = _minimise(
+    strip = build_strip(mesh, start, end, kinds, elements, count, _SNAP_TOL)
+    u, gnorm, _, _ = minimise(
         mesh.faces, strip, mesh.vertices, nrm, u0, alpha, n_quad, tol, max_steps
     )
-    lens = _lengths(mesh.faces, strip, mesh.vertices, nrm, u, alpha, n_quad)
+    lens = lengths(mesh.faces, strip, mesh.vertices, nrm, u, alpha, n_quad)
     length = jnp.sum(lens)
     ok = (gnorm <= tol) & strip.valid & jnp.isfinite(length)
     return jnp.where(strip.free, u, 0.0), length, ok, strip.face
@@ -921,7 +517,7 @@ def _smooth_path(
 
     def body(state):
         (k, e, u, c), at = contacts(state)
-        strip = _build_strip(m0, s0, e0, k, e, c, _SNAP_TOL)
+        strip = build_strip(m0, s0, e0, k, e, c, _SNAP_TOL)
         arcs = rep.node_arcs(m0, s0, e0, k, e, u, c, strip.face)
         # the choices: none, all to side 0, all to side 1, then single contacts
         order = jnp.cumsum(at) - 1  # rank of each contact

@@ -70,7 +70,16 @@ LAYERS: dict[str, tuple[set[str], set[str]]] = {
     # the exact polyhedral engine (a sibling of the laser: neither imports the other)
     "exact": ({"_sleeve", "_starts", "exact"}, {"surface"}),
     # geodesics of the Phong surface (uses the laser layer's normals)
-    "smooth": ({"smooth", "_smooth_repair"}, {"laser"}),
+    "smooth": (
+        {
+            "smooth",
+            "_smooth_strip",
+            "_smooth_newton",
+            "_smooth_unfold",
+            "_smooth_repair",
+        },
+        {"laser"},
+    ),
     # the three methods as eqx.Modules
     "methods": ({"methods"}, {"laser", "exact", "smooth"}),
     # the one pipeline: shortest_path, path_length, solve
