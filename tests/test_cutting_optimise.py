@@ -76,8 +76,8 @@ def test_seams_along_mesh_edges_are_held_and_the_others_move():
     for i in (0, 3):
         x[i], x[n + i] = on_edges.x[i], on_edges.x[n + i]
     layout = layout.with_x(x)
-    eps = tuple(float(e) for e in np.asarray(PRESTRESS.strain(MATERIAL))[:2])
-    settings = Settings(MATERIAL, PRESTRESS, eps, 1.0)
+    ew, ef = (float(e) for e in np.asarray(PRESTRESS.strain(MATERIAL))[:2])
+    settings = Settings(MATERIAL, PRESTRESS, (ew, ef), 1.0)
     res = optimise_seams(mesh, layout, settings, steps=4, rounds=1)
     r = res.rounds[0]
     assert r["held"] == 2
