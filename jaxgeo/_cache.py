@@ -1,4 +1,5 @@
-"""The persistent XLA compilation cache, in one call.
+"""Process-wide settings the command line turns on: the persistent XLA
+compilation cache, in one call, and one BLAS thread (`limit_blas_threads`).
 
 jaxgeo's solvers take 15-60 s to compile per mesh size and method; JAX can keep
 the compiled code on disk so that the next process reuses it. The command line
@@ -13,6 +14,7 @@ delete it to reclaim the space).
 
 from __future__ import annotations
 
+import ctypes
 import os
 
 #: Where the command line and `enable_compilation_cache()` keep compiled code
@@ -48,3 +50,58 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> str:
         # call after some compilations (or with a new path) takes effect.
         compilation_cache.reset_cache()
     return path
+
+
+#: the variables that, when set by the user, leave the BLAS threads alone
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+#: the setter of each OpenBLAS build numpy, scipy and jaxlib load (scipy's
+#: wheels rename it; the 64-bit integer build adds a suffix)
+_SETTERS = (
+    "openblas_set_num_threads",
+    "openblas_set_num_threads64_",
+    "scipy_openblas_set_num_threads",
+    "scipy_openblas_set_num_threads64_",
+)
+
+
+def limit_blas_threads() -> int:
+    """One BLAS thread for this process, unless the user chose: a no-op when
+    `OPENBLAS_NUM_THREADS` or `OMP_NUM_THREADS` is set.
+
+    jaxlib's batched LAPACK calls (the banded flattening's Cholesky and
+    triangular solves, `cutting.objective`) run in scipy's OpenBLAS, whose
+    threads spin against other processes on a busy or small CPU (one
+    factorisation of the twin-peak tent's cloths: 0.44-1.6 s with the default
+    threads, 45 ms with one; `docs/cutting.md`). OpenBLAS reads the variable
+    only when it is loaded, and `import jaxgeo` has loaded it (numpy, scipy)
+    before any command runs, so this sets `OPENBLAS_NUM_THREADS=1` for what
+    loads later and for child processes, and calls the setter of every
+    OpenBLAS already in the process (Linux: found in `/proc/self/maps`;
+    elsewhere only the variable). A library user sets the variable before
+    importing numpy, scipy or jax (or uses `threadpoolctl`).
+
+    **Returns:** how many loaded OpenBLAS libraries were set to one thread.
+    """
+    if any(v in os.environ for v in BLAS_THREAD_VARIABLES):
+        return 0
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    try:
+        with open("/proc/self/maps") as f:
+            libs = {ln.split()[-1] for ln in f if "openblas" in ln.lower()}
+    except OSError:
+        return 0
+    done = 0
+    for path in sorted(libs):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in _SETTERS:
+            setter = getattr(lib, name, None)
+            if setter is not None:
+                setter.argtypes = [ctypes.c_int]
+                setter.restype = None
+                setter(1)
+                done += 1
+                break
+    return done

@@ -263,3 +263,36 @@ def test_surface_writes_the_shipped_example(tmp_path, capsys):
         extent = np.ptp(b, axis=0).max()
         np.testing.assert_allclose(a, b, rtol=0, atol=16 * np.finfo(float).eps * extent)
     assert "faces" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("user", [None, "3"])
+def test_cli_limits_blas_threads_unless_the_user_set_them(user):
+    """`limit_blas_threads` (run by `main`) sets every OpenBLAS already loaded by
+    `import jaxgeo` to one thread, and leaves a user's OPENBLAS_NUM_THREADS."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import os, jaxgeo\n"
+        "from jaxgeo._cache import limit_blas_threads\n"
+        "print(limit_blas_threads(), os.environ.get('OPENBLAS_NUM_THREADS'))\n"
+    )
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+    }
+    if user:
+        env["OPENBLAS_NUM_THREADS"] = user
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr
+    n, value = out.stdout.split()
+    if user:
+        assert (int(n), value) == (0, user)
+    else:
+        assert value == "1"
+        if sys.platform.startswith("linux"):
+            assert int(n) >= 1  # numpy's and scipy's OpenBLAS

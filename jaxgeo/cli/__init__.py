@@ -58,9 +58,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     import jax
 
-    from .._cache import enable_compilation_cache
+    from .._cache import enable_compilation_cache, limit_blas_threads
     from .._errors import JaxgeoError
 
+    # one BLAS thread unless OPENBLAS_NUM_THREADS / OMP_NUM_THREADS say
+    # otherwise: the flattening's LAPACK threads spin on a busy CPU
+    limit_blas_threads()
     jax.config.update("jax_enable_x64", True)
     # Compiled solvers are cached on disk: the second run of a command skips the
     # JIT compilation that dominates a short run.

@@ -301,6 +301,9 @@ def run_pattern(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:  # stand-alone use and tests
+    from .._cache import limit_blas_threads
+
+    limit_blas_threads()  # as the `jaxgeo` command
     parser = argparse.ArgumentParser(prog="jaxgeo")
     add_pattern_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)

@@ -2,10 +2,11 @@
 width-only optimisation (`jaxgeo.seams.fit_roll`) and the stress optimisation
 (`optimise_seams`), on the twin-peak tent and the four-point sail.
 
-    OPENBLAS_NUM_THREADS=1 python -m jaxgeo.cutting.compare --steps 6 --rounds 2
+    python -m jaxgeo.cutting.compare --steps 6 --rounds 2
 
-(one BLAS thread: on a shared 2-core CPU the batched LAPACK calls of the
-banded flattening otherwise spin against other processes, docs/cutting.md)
+(it runs with one BLAS thread unless `OPENBLAS_NUM_THREADS` or
+`OMP_NUM_THREADS` is set: on a shared 2-core CPU the batched LAPACK calls of
+the banded flattening otherwise spin against other processes, docs/cutting.md)
 
 Every layout is measured the same way: seams traced with the optimiser's
 method, cut, flattened by `jaxgeo.pattern.make_pattern`, compensated by the
@@ -176,5 +177,8 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     import jax
 
+    from .._cache import limit_blas_threads
+
+    limit_blas_threads()
     jax.config.update("jax_enable_x64", True)
     raise SystemExit(main())

@@ -52,7 +52,7 @@ from .compensate import CutCloth
 from .material import Material, Prestress
 from .reassembly import biot_strain, deviation
 
-__all__ = ["Settings", "Template", "evaluate", "make_template"]
+__all__ = ["Settings", "Template", "evaluate", "make_template", "trace_seams"]
 
 INSET = 1e-6  # as jaxgeo.seams.INSET
 #: Gauss-Newton steps of the flattening (all solvers), and its tolerances
@@ -188,13 +188,23 @@ def make_template(
     cloths: list[CutCloth],
     capacity: Capacity | None = None,
     seam_weight: float = 10.0,
+    starts: list | None = None,
+    report: list | None = None,
 ) -> tuple[Template, Capacity]:
     """The template of `layout` from its traced `paths`, `cut` and compensated
     cloths (`compensate.compensate_pattern`, uniform compensation). The paths
     must be traced with the objective's method and capacity
     (`Settings.method`, `Settings.max_points`; `jaxgeo.seams.cut` defaults to
     the exact method), else `evaluate` finds the template broken (`valid`
-    false)."""
+    false).
+
+    `starts`: per cloth `None` or a second start of its flattening (`(n, 2)`,
+    the cloth's vertex order; e.g. the previous template's flattening carried
+    over, `optimise`): where the flattening converges from it, the template
+    continues that branch (its warp the principal axis of that flattening),
+    else starts from the pattern's flattening. `report`, if given, gets per
+    cloth `(edge-strain energy from the pattern's flattening, from the start
+    or nan, start kept)`."""
     cap = capacity or Capacity.of(cut, cloths)
     m = int(paths.points.shape[1])
     idx, w = cut.sources(mesh.n_vertices, m)
@@ -242,9 +252,25 @@ def make_template(
         pos[k, :n], band = _order(e, n)
         if 2 * band + 2 > cap.block:
             raise JaxgeoError("a cloth's bandwidth outgrew the template's block")
-        uv0[k, :n] = _converged(x3[c.vertex_ids], e, ew[k, : len(e)], c.uv)
+        xk, ek = x3[c.vertex_ids], ew[k, : len(e)]
+        uv_k, _ = _converged(xk, e, ek, c.uv)
+        a, e_fresh, e_start, kept = (
+            cc.warp_angle,
+            _edge_energy(xk, e, ek, uv_k),
+            np.nan,
+            False,
+        )
+        if starts is not None and starts[k] is not None:
+            from .compensate import principal_angle
+
+            uv_s, ok = _converged(xk, e, ek, np.asarray(starts[k], np.float64))
+            e_start = _edge_energy(xk, e, ek, uv_s)
+            if ok:  # continue the start's branch
+                uv_k, a, kept = uv_s, principal_angle(uv_s, f), True
+        if report is not None:
+            report.append((e_fresh, e_start, kept))
+        uv0[k, :n] = uv_k
         free[k, :n] = _gauge_pins(uv0[k, :n])
-        a = cc.warp_angle
         rot[k] = [[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]]
     t = Template(
         layout.packed,
@@ -264,6 +290,14 @@ def make_template(
     return t, cap
 
 
+def _edge_energy(xc, edges, ew, uv):
+    """1/2 sum of the squared weighted edge-length residuals of a flattening
+    (`_residuals`' edge part, numpy)."""
+    L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
+    d = np.sqrt(np.sum((uv[edges[:, 0]] - uv[edges[:, 1]]) ** 2, 1) + 1e-30)
+    return 0.5 * float(np.sum(ew / L**2 * (d - L) ** 2))
+
+
 def _converged(xc, edges, ew, uv):
     """The flattening of `evaluate` at the template layout, converged from `uv`
     (`jaxgeo.pattern`'s) by Newton steps from the start (Gauss-Newton did not
@@ -274,14 +308,14 @@ def _converged(xc, edges, ew, uv):
     branch. From `make_pattern`'s flattening (30 function evaluations, not
     converged on the twin-peak tent's two large cloths) Newton reached other
     local optima at layouts 1e-6 apart: J jumped between 131, 157 and 323
-    (central differences off by 30x)."""
+    (central differences off by 30x). Returns (uv, converged)."""
     L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
     sw = np.sqrt(ew) / L
     for newton in (np.inf, NEWTON_NEAR):  # Newton, else Gauss-Newton first
         u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv, newton, 5 * HOST_STEPS)
         if ok:
-            return u
-    return uv
+            return u, True
+    return uv, False
 
 
 def _safe_norm(d):
@@ -815,12 +849,12 @@ def _implicit_jvp(solver, primals, tangents):
     return u, -du
 
 
-def evaluate(
+def trace_seams(
     x: Float[Array, " P"], mesh: Mesh, template: Template, settings: Settings
-) -> tuple[Float[Array, ""], dict]:
-    """`J(x)` (module docstring) and its parts: `rms`, `max` (stress deviation,
-    kN/m), `waste`, `fit`, `widths` `(C,)`, `valid` (the template still holds
-    and every solve succeeded)."""
+):
+    """The seams at `x` (`jax.vmap` of `shortest_path`, the method and
+    capacity of `settings`) and per seam whether it keeps the template's
+    sequence of mesh elements and was traced (`(N,)` bool)."""
     t, s = template, settings
     n = t.loop_a.shape[0]
 
@@ -833,12 +867,24 @@ def evaluate(
 
     paths = jax.vmap(seam)(t.loop_a, t.loop_b, x[:n], x[n:])
     m = jnp.arange(paths.kinds.shape[1])[None] < t.count[:, None]
-    same = (
-        jnp.all(paths.count == t.count)
-        & jnp.all(jnp.where(m, paths.kinds == t.kinds, True))
-        & jnp.all(jnp.where(m, paths.elements == t.elements, True))
-        & jnp.all(paths.status == Status.SUCCESS)
+    keep = (
+        (paths.count == t.count)
+        & jnp.all(jnp.where(m, paths.kinds == t.kinds, True), axis=1)
+        & jnp.all(jnp.where(m, paths.elements == t.elements, True), axis=1)
+        & (paths.status == Status.SUCCESS)
     )
+    return paths, keep
+
+
+def evaluate(
+    x: Float[Array, " P"], mesh: Mesh, template: Template, settings: Settings
+) -> tuple[Float[Array, ""], dict]:
+    """`J(x)` (module docstring) and its parts: `rms`, `max` (stress deviation,
+    kN/m), `waste`, `fit`, `widths` `(C,)`, `valid` (the template still holds
+    and every solve succeeded)."""
+    t, s = template, settings
+    paths, keep = trace_seams(x, mesh, t, s)
+    same = jnp.all(keep)
     src = jnp.concatenate([mesh.vertices, paths.points.reshape(-1, 3)])
     x3 = jnp.sum(src[t.src_idx] * t.src_w[..., None], axis=1)
     cw, cf = s.compensation
@@ -868,9 +914,9 @@ def evaluate(
         length = jnp.max(jnp.where(vmask > 0, xs, -big)) - jnp.min(
             jnp.where(vmask > 0, xs, big)
         )
-        return d, area, width, length, ok
+        return d, area, width, length, ok, u
 
-    d, area, width, length, ok = jax.vmap(cloth)(
+    d, area, width, length, ok, u_all = jax.vmap(cloth)(
         t.verts, t.vmask, t.edges, t.ew, t.faces, t.fmask, t.uv0, t.rot, t.pos, t.free
     )
     total = jnp.sum(area)
@@ -882,6 +928,10 @@ def evaluate(
     j = rms / p + s.waste * waste + s.fit * fit
     valid = same & jnp.all(ok)
     return j, {
+        # the cloths' design positions and flattenings (before the warp turn
+        # and the compensation), to carry a flattening over to a new template
+        "x3": x3[t.verts],
+        "uv": u_all,
         "rms": rms,
         "max": dmax,
         "waste": waste,
