@@ -182,26 +182,25 @@ def test_element_reads_vertex_edge_and_face_points():
     on_edges = jax.vmap(lambda e, t: jg.SurfacePoint.on_edge(MESH, e, t))(es, ts)
     vertices = jax.vmap(lambda i: jg.SurfacePoint.vertex(MESH, i))(np.arange(4))
     inside = jg.SurfacePoint(jnp.array([7, 30]), jnp.array([[0.2, 0.3, 0.5]] * 2))
-    want = {
-        "edges": (
-            [EDGE, VERTEX, VERTEX, EDGE, EDGE],
-            [5, edges[17, 0], edges[17, 1], 40, len(edges) - 1],
-            [0.25, 0, 0, 1e-13, 0.7],
-        ),
-        "vertices": ([VERTEX] * 4, [0, 1, 2, 3], [0] * 4),
-        "faces": ([FACE] * 2, [7, 30], [0, 0]),
-    }
-    for name, sp in (("edges", on_edges), ("vertices", vertices), ("faces", inside)):
-        readings = [
-            sp.element(MESH),  # batched as it is
-            jax.jit(lambda p: p.element(MESH))(sp),
-            jax.vmap(lambda p: p.element(MESH))(sp),
-        ]
-        for kind, index, t in readings:
-            assert np.asarray(kind).tolist() == want[name][0], name
-            assert np.asarray(index).tolist() == list(want[name][1]), name
-            # exact: on_edge stores t and 1 - t, and (1 - t) + t is 1 in floats
-            assert np.asarray(t).tolist() == want[name][2], name
+    # one batch of all three (one compile each under jit and vmap)
+    groups = (on_edges, vertices, inside)
+    sp = jg.SurfacePoint(
+        jnp.concatenate([jnp.asarray(g.face, jnp.int32) for g in groups]),
+        jnp.concatenate([jnp.asarray(g.bary) for g in groups]),
+    )
+    want_kind = [EDGE, VERTEX, VERTEX, EDGE, EDGE] + [VERTEX] * 4 + [FACE] * 2
+    want_index = [5, edges[17, 0], edges[17, 1], 40, len(edges) - 1, 0, 1, 2, 3, 7, 30]
+    # exact: on_edge stores t and 1 - t, and (1 - t) + t is 1 in floats
+    want_t = [0.25, 0, 0, 1e-13, 0.7] + [0] * 6
+    readings = [
+        sp.element(MESH),  # batched as it is
+        jax.jit(lambda p: p.element(MESH))(sp),
+        jax.vmap(lambda p: p.element(MESH))(sp),
+    ]
+    for kind, index, t in readings:
+        assert np.asarray(kind).tolist() == want_kind
+        assert np.asarray(index).tolist() == want_index
+        assert np.asarray(t).tolist() == want_t
     # a tolerance: a point a hair off an edge reads as the edge, its t the share
     bary = on_edges.bary[0]
     off = jg.SurfacePoint(on_edges.face[0], bary * (1 - 1e-10) + 1e-10 * (bary == 0))
