@@ -18,6 +18,10 @@ from .mesh import Mesh
 #: below this for any mesh that resolves its surface (h ≪ R).
 DEFAULT_MAX_DISTANCE = 0.5
 
+#: Kinds of mesh element, as `snap` and `SurfacePoint.element` answer (and as
+#: `Path.kinds` holds them, kind 0 there being an endpoint).
+FACE, EDGE, VERTEX = 0, 1, 2
+
 
 class SurfacePoint(eqx.Module):
     """A point of the mesh: a face and barycentric coordinates in it.
@@ -25,7 +29,9 @@ class SurfacePoint(eqx.Module):
     `bary[i]` weighs corner `i` of the face. A point on an edge has one zero
     coordinate (`bary[i] = 0` ⇒ edge `mesh.face_edges[face, i]`), a vertex two:
     `SurfacePoint.vertex(mesh, i)` and `SurfacePoint.on_edge(mesh, e, t)` make
-    them, and `snap` tells which element a point lies on. Differentiable in
+    them, and `element` reads a point back as the element it lies on (vertex,
+    edge + parameter or face, as geometry-central's tagged `SurfacePoint`).
+    Differentiable in
     `bary` (e.g. to slide an endpoint along a boundary edge). A `Path` keeps its
     endpoints as these (`Path.start`, `Path.end`).
     """
@@ -75,6 +81,28 @@ class SurfacePoint(eqx.Module):
         t = jnp.asarray(t, mesh.vertices.dtype)
         bary = (1 - t) * (corners == a) + t * (corners == b)
         return cls(face.astype(jnp.int32), jnp.where(ok, bary, jnp.nan))
+
+    def element(
+        self, mesh: Mesh, tol: float = 0.0
+    ) -> tuple[Int[Array, "*B"], Int[Array, "*B"], Float[Array, "*B"]]:
+        """The element the point lies on, `(kind, index, t)`: kind `VERTEX` (index
+        a vertex), `EDGE` (index an edge, `t` the parameter along it in
+        `mesh.edges` orientation, as `on_edge` takes it) or `FACE` (index the
+        face); `t` is 0 but on an edge. Barycentric coordinates `<= tol` count as
+        zero (`snap`); an edge point's `t` is then its coordinates' share
+        `b_1 / (b_0 + b_1)` at the edge's two ends. The inverse of `vertex` and
+        `on_edge` (`t` exactly, for `t` in [0, 1]; at 0 or 1 the point is the
+        vertex). Batched alike (leading axes B); works under `jax.jit` and
+        `jax.vmap`; differentiable in `t` through `bary`."""
+        kind, index = snap(mesh, self, tol)
+        face, bary = jnp.asarray(self.face), jnp.asarray(self.bary)
+        on_edge = kind == EDGE
+        ends = mesh.edges[jnp.where(on_edge, index, 0)]
+        corners = mesh.faces[face]
+        b0 = jnp.sum(jnp.where(corners == ends[..., :1], bary, 0), axis=-1)
+        b1 = jnp.sum(jnp.where(corners == ends[..., 1:], bary, 0), axis=-1)
+        t = jnp.where(on_edge, b1 / jnp.where(on_edge, b0 + b1, 1), 0)
+        return kind, index, t
 
 
 def vertex_valid(mesh: Mesh, i: Int[ArrayLike, "*B"]) -> Bool[Array, "*B"]:
@@ -249,18 +277,20 @@ def _search_blocks(point, tri, real, done, face, dist2):
 
 def snap(
     mesh: Mesh, sp: SurfacePoint, tol: float
-) -> tuple[Int[Array, ""], Int[Array, ""]]:
-    """The mesh element a surface point lies on, as `(kind, index)`: kind 0 a face,
-    1 an edge, 2 a vertex. Barycentric coordinates below `tol` count as zero."""
-    bary = jnp.asarray(sp.bary)
+) -> tuple[Int[Array, "*B"], Int[Array, "*B"]]:
+    """The mesh element a surface point lies on, as `(kind, index)`: kind `FACE`
+    (0), `EDGE` (1) or `VERTEX` (2). Barycentric coordinates below `tol` count as
+    zero. Batched alike (leading axes B); `SurfacePoint.element` adds the edge
+    parameter."""
+    bary, face = jnp.asarray(sp.bary), jnp.asarray(sp.face)
     small = bary <= tol
-    n_small = jnp.sum(small)
-    corner = jnp.argmax(bary)
-    edge_corner = jnp.argmax(small)
-    kind = jnp.where(n_small >= 2, 2, jnp.where(n_small == 1, 1, 0))
+    n_small = jnp.sum(small, axis=-1)
+    corner = jnp.argmax(bary, axis=-1)
+    edge_corner = jnp.argmax(small, axis=-1)
+    kind = jnp.where(n_small >= 2, VERTEX, jnp.where(n_small == 1, EDGE, FACE))
     index = jnp.where(
-        kind == 2,
-        mesh.faces[sp.face, corner],
-        jnp.where(kind == 1, mesh.face_edges[sp.face, edge_corner], sp.face),
+        kind == VERTEX,
+        mesh.faces[face, corner],
+        jnp.where(kind == EDGE, mesh.face_edges[face, edge_corner], face),
     )
     return kind.astype(jnp.int32), index.astype(jnp.int32)

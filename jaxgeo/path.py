@@ -13,7 +13,10 @@ from jaxtyping import Array, Bool, Float, Int, Shaped
 
 from ._errors import JaxgeoError
 from ._numerics import safe_norm
-from .locate import SurfacePoint
+from .locate import EDGE, FACE, VERTEX, SurfacePoint
+from .mesh import Mesh
+
+__all__ = ["EDGE", "FACE", "VERTEX", "Path", "Status", "pad_tail", "polyline_length"]
 
 
 class Status(enum.IntEnum):
@@ -58,9 +61,6 @@ _MESSAGES = {
     Status.INVALID_ENDPOINT: "an endpoint is not a point of the mesh (a vertex or "
     "face index out of range, or a vertex in no face)",
 }
-
-#: Kinds of path point, as in `Path.kinds`.
-FACE, EDGE, VERTEX = 0, 1, 2
 
 
 class Path(eqx.Module):
@@ -123,6 +123,54 @@ class Path(eqx.Module):
     @property
     def n_branch_points(self) -> Int[Array, ""]:
         return jnp.sum(self.branch)
+
+    def surface_points(self, mesh: Mesh) -> SurfacePoint:
+        """The path's nodes as one `SurfacePoint` with leading axes `(*B, M)`: a
+        vertex node as `SurfacePoint.vertex`, an edge crossing as
+        `SurfacePoint.on_edge(mesh, element, param)`, the endpoints as `start`
+        and `end`; entries past `count` repeat the last node, as `points` does.
+        So `surface_points(mesh).position(mesh)` is `points` (to rounding; for
+        the smooth method, whose points lie on the Phong surface, it is where on
+        the mesh each node is), and `.element(mesh)` reads back
+        `(kinds, elements, params)` with the endpoints' own elements. Works
+        under `jax.jit` and `jax.vmap`; differentiable in `params` and the
+        endpoints' coordinates."""
+        if self.start is None or self.end is None:
+            raise JaxgeoError(
+                "surface_points needs the path's endpoints (start, end): trace it "
+                "with shortest_path, shortest_paths or solve"
+            )
+        m = self.kinds.shape[-1]
+        node = jnp.minimum(jnp.arange(m), jnp.maximum(self.count[..., None] - 1, 0))
+        kinds, elements, params = (
+            jnp.take_along_axis(x, node, axis=-1)
+            for x in (self.kinds, self.elements, self.params)
+        )
+
+        def on_mesh(kind, element, param):
+            v = SurfacePoint.vertex(mesh, element)
+            e = SurfacePoint.on_edge(mesh, element, param)
+            vertex = kind == VERTEX
+            bary = jnp.where(vertex, jnp.asarray(v.bary), jnp.asarray(e.bary))
+            return jnp.where(vertex, v.face, e.face), bary
+
+        flat = jax.vmap(on_mesh)(*(x.reshape(-1) for x in (kinds, elements, params)))
+        face, bary = flat[0].reshape(kinds.shape), flat[1].reshape(*kinds.shape, 3)
+        # the endpoints' faces and coordinates along the nodes: node 0 is the
+        # start, any other endpoint node the end
+        first = jnp.arange(m) == 0
+        ends = [jnp.asarray(p.face)[..., None] for p in (self.start, self.end)]
+        end_face = jnp.where(first, *jnp.broadcast_arrays(*ends))
+        ends = [
+            jnp.asarray(p.bary, bary.dtype)[..., None, :]
+            for p in (self.start, self.end)
+        ]
+        end_bary = jnp.where(first[:, None], *jnp.broadcast_arrays(*ends))
+        endpoint = kinds == FACE
+        return SurfacePoint(
+            jnp.where(endpoint, end_face, face).astype(jnp.int32),
+            jnp.where(endpoint[..., None], end_bary, bary),
+        )
 
     def polyline(self) -> np.ndarray:
         """The path's points as a numpy array `(count, 3)` (not jit-able). On a

@@ -23,6 +23,8 @@ import trimesh
 from jaxtyping import Float, Int
 
 from ._errors import JaxgeoError
+from ._grids import grid_faces as grid_faces
+from .formfinding import four_point_sail as _form_found_sail
 
 __all__ = [
     "catenoid",
@@ -80,25 +82,6 @@ def _ring_angles(n_rings: int, n_around: int) -> np.ndarray:
     k = np.arange(n_rings)[:, None]
     i = np.arange(n_around)[None, :]
     return 2.0 * np.pi * (i + 0.5 * (k % 2)) / n_around
-
-
-def grid_faces(nx: int, ny: int) -> np.ndarray:
-    """Faces of a `(nx + 1) × (ny + 1)` vertex grid (index `a*(ny + 1) + b`), each
-    cell split along alternating diagonals, counter-clockwise in (a, b)."""
-    a, b = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
-    a, b = a.ravel(), b.ravel()
-    v00 = a * (ny + 1) + b
-    v10 = v00 + (ny + 1)
-    v01 = v00 + 1
-    v11 = v10 + 1
-    even = (a + b) % 2 == 0
-    t1 = np.where(
-        even[:, None], np.stack([v00, v10, v11], 1), np.stack([v00, v10, v01], 1)
-    )
-    t2 = np.where(
-        even[:, None], np.stack([v00, v11, v01], 1), np.stack([v10, v11, v01], 1)
-    )
-    return np.concatenate([t1, t2]).astype(np.int64)
 
 
 # --------------------------------------------------------------------------- spheres
@@ -402,13 +385,11 @@ def four_point_sail(
 ) -> tuple[Vertices, Faces]:
     """Four-point sail (hypar) form-found by the force density method over the
     square [0, span]² in plan, corners alternately at `low` and `high`, edge-cable
-    force density `q_cable`, membrane `q_membrane` (`jaxgeo.cutting.formfinding`,
+    force density `q_cable`, membrane `q_membrane` (`jaxgeo.formfinding`,
     which also gives the four edge cables by name). `2n²` faces, one boundary
     loop, normals up. Unlike the other surfaces its vertices lie on no analytic
     surface: it is an equilibrium shape."""
-    from .cutting.formfinding import four_point_sail as _sail
-
-    sail = _sail(n, span, high, low, q_cable, q_membrane)
+    sail = _form_found_sail(n, span, high, low, q_cable, q_membrane)
     return sail.vertices, sail.faces
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from jaxgeo import JaxgeoError, surfaces
-from jaxgeo.cutting.formfinding import force_density, four_point_sail
+from jaxgeo.formfinding import force_density, four_point_sail
 
 
 def test_a_cable_of_equal_force_densities_is_straight_and_evenly_divided():
@@ -58,3 +58,11 @@ def test_sail_surface_is_a_builtin():
     assert (n[:, 2] > 0).all()
     with pytest.raises(JaxgeoError, match="force densities"):
         four_point_sail(6, q_cable=-1.0)
+
+
+def test_old_import_path_reexports_the_form_finder():
+    import jaxgeo.cutting.formfinding as old
+    import jaxgeo.formfinding as new
+
+    assert old.four_point_sail is new.four_point_sail
+    assert old.force_density is new.force_density and old.Sail is new.Sail

@@ -165,3 +165,86 @@ def test_bad_surface_point_raises():
 def test_mesh_argument_must_be_a_mesh():
     with pytest.raises(jg.JaxgeoError, match="jaxgeo.Mesh"):
         jg.shortest_path(np.zeros((3, 3)), np.zeros(3), np.zeros(3))
+
+
+def test_element_reads_vertex_edge_and_face_points():
+    """`SurfacePoint.element` is the tagged reading (geometry-central's vertex,
+    edge + t, face): the inverse of `vertex` and `on_edge` (t exactly, in
+    `mesh.edges` orientation; t = 0 or 1 is the vertex), the face otherwise;
+    batched, under `jax.jit` and under `jax.vmap` alike."""
+    import jax
+
+    from jaxgeo.locate import EDGE, FACE, VERTEX
+
+    edges = np.asarray(MESH.edges)
+    es = np.array([5, 17, 17, 40, len(edges) - 1])
+    ts = np.array([0.25, 0.0, 1.0, 1e-13, 0.7])
+    on_edges = jax.vmap(lambda e, t: jg.SurfacePoint.on_edge(MESH, e, t))(es, ts)
+    vertices = jax.vmap(lambda i: jg.SurfacePoint.vertex(MESH, i))(np.arange(4))
+    inside = jg.SurfacePoint(jnp.array([7, 30]), jnp.array([[0.2, 0.3, 0.5]] * 2))
+    # one batch of all three (one compile each under jit and vmap)
+    groups = (on_edges, vertices, inside)
+    sp = jg.SurfacePoint(
+        jnp.concatenate([jnp.asarray(g.face, jnp.int32) for g in groups]),
+        jnp.concatenate([jnp.asarray(g.bary) for g in groups]),
+    )
+    want_kind = [EDGE, VERTEX, VERTEX, EDGE, EDGE] + [VERTEX] * 4 + [FACE] * 2
+    want_index = [5, edges[17, 0], edges[17, 1], 40, len(edges) - 1, 0, 1, 2, 3, 7, 30]
+    # exact: on_edge stores t and 1 - t, and (1 - t) + t is 1 in floats
+    want_t = [0.25, 0, 0, 1e-13, 0.7] + [0] * 6
+    readings = [
+        sp.element(MESH),  # batched as it is
+        jax.jit(lambda p: p.element(MESH))(sp),
+        jax.vmap(lambda p: p.element(MESH))(sp),
+    ]
+    for kind, index, t in readings:
+        assert np.asarray(kind).tolist() == want_kind
+        assert np.asarray(index).tolist() == want_index
+        assert np.asarray(t).tolist() == want_t
+    # a tolerance: a point a hair off an edge reads as the edge, its t the share
+    bary = on_edges.bary[0]
+    off = jg.SurfacePoint(on_edges.face[0], bary * (1 - 1e-10) + 1e-10 * (bary == 0))
+    kind, index, t = off.element(MESH, tol=1e-9)
+    assert (int(kind), int(index)) == (EDGE, 5) and abs(float(t) - 0.25) < 1e-15
+    assert int(off.element(MESH)[0]) == FACE
+
+
+@pytest.mark.parametrize("method", ["exact", "laser"])
+def test_path_nodes_as_surface_points(method):
+    """`Path.surface_points`: every node as a `SurfacePoint` at `points` (past
+    `count`, the last node, as `points`); its `element` reading gives back the
+    crossings' and vertices' `(kinds, elements, params)` exactly, and the
+    endpoints' elements; under `jax.jit` and on a batch of rows alike."""
+    import jax
+
+    from jaxgeo.locate import FACE
+
+    v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
+    b = 0.5 * (v[f[200, 1]] + v[f[200, 2]])
+    p1 = jg.shortest_path(MESH, v[f[0, 0]], b, method=method)
+    p2 = jg.shortest_path(MESH, 3, 150, method=method)
+    for path in (p1, p2):
+        assert path.outcome == jg.Status.SUCCESS
+        sp = path.surface_points(MESH)
+        assert np.shape(sp.face) == np.shape(path.kinds)
+        np.testing.assert_allclose(sp.position(MESH), path.points, rtol=0, atol=1e-14)
+        kind, index, t = sp.element(MESH)
+        inner = np.asarray(path.kinds) != FACE
+        inner[int(path.count) :] = False
+        assert (np.asarray(kind)[inner] == np.asarray(path.kinds)[inner]).all()
+        assert (np.asarray(index)[inner] == np.asarray(path.elements)[inner]).all()
+        assert (np.asarray(t)[inner] == np.asarray(path.params)[inner]).all()
+        ends = [path.start, path.end]
+        assert path.start is not None and path.end is not None
+        want = [snap(MESH, e, 0.0) for e in ends]
+        got = np.asarray(jnp.stack([kind, index]))[:, [0, int(path.count) - 1]]
+        assert got.T.tolist() == [[int(k), int(i)] for k, i in want]
+        jitted = jax.jit(lambda p: p.surface_points(MESH))(path)
+        assert (np.asarray(jitted.face) == np.asarray(sp.face)).all()
+        np.testing.assert_array_equal(jitted.bary, sp.bary)
+    batch = jax.tree.map(lambda *x: jnp.stack(x), p1, p2)
+    rows = batch.surface_points(MESH)
+    for r, path in enumerate((p1, p2)):
+        one = path.surface_points(MESH)
+        np.testing.assert_array_equal(rows.face[r], one.face)
+        np.testing.assert_array_equal(rows.bary[r], one.bary)

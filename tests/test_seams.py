@@ -10,7 +10,7 @@ from jaxgeo import seams, surfaces
 
 @pytest.mark.slow  # a new mesh shape: ~14 s of compiles on the shared machine
 def test_parallel_layout_spans_the_sail_in_equal_bands():
-    from jaxgeo.cutting.formfinding import four_point_sail
+    from jaxgeo.formfinding import four_point_sail
 
     sail = four_point_sail(8)
     mesh = jg.Mesh(sail.vertices, sail.faces)
