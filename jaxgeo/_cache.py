@@ -14,7 +14,6 @@ delete it to reclaim the space).
 
 from __future__ import annotations
 
-import ctypes
 import os
 
 #: Where the command line and `enable_compilation_cache()` keep compiled code
@@ -54,14 +53,6 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> str:
 
 #: the variables that, when set by the user, leave the BLAS threads alone
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
-#: the setter of each OpenBLAS build numpy, scipy and jaxlib load (scipy's
-#: wheels rename it; the 64-bit integer build adds a suffix)
-_SETTERS = (
-    "openblas_set_num_threads",
-    "openblas_set_num_threads64_",
-    "scipy_openblas_set_num_threads",
-    "scipy_openblas_set_num_threads64_",
-)
 
 
 def limit_blas_threads() -> int:
@@ -74,34 +65,18 @@ def limit_blas_threads() -> int:
     factorisation of the twin-peak tent's cloths: 0.44-1.6 s with the default
     threads, 45 ms with one; `docs/cutting.md`). OpenBLAS reads the variable
     only when it is loaded, and `import jaxgeo` has loaded it (numpy, scipy)
-    before any command runs, so this sets `OPENBLAS_NUM_THREADS=1` for what
-    loads later and for child processes, and calls the setter of every
-    OpenBLAS already in the process (Linux: found in `/proc/self/maps`;
-    elsewhere only the variable). A library user sets the variable before
-    importing numpy, scipy or jax (or uses `threadpoolctl`).
+    before any command runs: so this sets `OPENBLAS_NUM_THREADS=1` for child
+    processes and limits every BLAS already loaded with `threadpoolctl`. A
+    library user sets the variable before importing numpy, scipy or jax, or
+    calls `threadpoolctl.threadpool_limits(1, user_api="blas")`.
 
-    **Returns:** how many loaded OpenBLAS libraries were set to one thread.
+    **Returns:** how many loaded BLAS libraries were limited.
     """
     if any(v in os.environ for v in BLAS_THREAD_VARIABLES):
         return 0
+    from threadpoolctl import ThreadpoolController
+
     os.environ["OPENBLAS_NUM_THREADS"] = "1"
-    try:
-        with open("/proc/self/maps") as f:
-            libs = {ln.split()[-1] for ln in f if "openblas" in ln.lower()}
-    except OSError:
-        return 0
-    done = 0
-    for path in sorted(libs):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for name in _SETTERS:
-            setter = getattr(lib, name, None)
-            if setter is not None:
-                setter.argtypes = [ctypes.c_int]
-                setter.restype = None
-                setter(1)
-                done += 1
-                break
-    return done
+    blas = ThreadpoolController().select(user_api="blas")
+    blas.limit(limits=1)
+    return len(blas.lib_controllers)
