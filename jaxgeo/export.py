@@ -21,30 +21,11 @@ from .cutting.material import Compensation
 
 __all__ = [
     "LAYERS",
-    "offset_polygon",
     "pieces",
     "write_dxf",
     "write_seams_obj",
     "write_svg",
 ]
-
-
-def offset_polygon(poly: np.ndarray, d: float) -> np.ndarray:
-    """Offset a counter-clockwise polygon outward by `d` (mitred corners, the
-    miter limited to 4·d)."""
-    p = np.asarray(poly, float)
-    e_in = p - np.roll(p, 1, axis=0)
-    e_out = np.roll(p, -1, axis=0) - p
-
-    def normal(e):
-        n = np.stack([e[:, 1], -e[:, 0]], 1)
-        return n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
-
-    n1, n2 = normal(e_in), normal(e_out)
-    bis = n1 + n2
-    bis /= np.maximum(np.linalg.norm(bis, axis=1), 1e-300)[:, None]
-    cos = np.maximum(np.einsum("ij,ij->i", bis, n2), 0.25)
-    return p + bis * (d / cos)[:, None]
 
 
 def pieces(pattern: Pattern, allowance: float = 0.0) -> list[Piece]:

@@ -9,7 +9,7 @@ import pytest
 import jaxgeo as jg
 from jaxgeo import seams, surfaces
 from jaxgeo.cli.pattern import main as pattern_main
-from jaxgeo.export import offset_polygon, write_dxf, write_seams_obj, write_svg
+from jaxgeo.export import write_dxf, write_seams_obj, write_svg
 from jaxgeo.pattern import cut_mesh, make_pattern, strip_width
 
 # Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
@@ -22,11 +22,6 @@ def test_strip_width_of_a_rotated_rectangle():
     rot = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
     w, _ = strip_width(r @ rot.T)
     assert np.isclose(w, 1.0)
-
-
-def test_offset_square():
-    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
-    assert np.allclose(offset_polygon(sq, 0.1), sq + 0.1 * np.sign(sq - 0.5))
 
 
 @pytest.fixture(scope="module")
