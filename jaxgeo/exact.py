@@ -442,7 +442,7 @@ def _round(mesh, theta, lane: _Lane, s, t, tol) -> _Lane:
         lane.corridor, lane.n, taken, v, a, b, p0, d, count
     )
     new, new_n = _clean(mesh, new, new_n, s, t)
-    good = sl.valid & fun_ok
+    good = sl.valid & fun_ok & (lane.n >= 1)  # (an empty corridor is no path)
     converged = good & (n_taken == 0)
     status = jnp.where(
         ~good,
@@ -744,6 +744,9 @@ def exact_solve(
         )
         cone = jnp.arange(chunks * k)
         used = (cone < detours) | (cone >= cone_chunks * k)  # walls: `valid`
+        # no detours of a pair none of whose starts converged: its `win` is the
+        # empty placeholder, whose "detours" would be empty corridors
+        used = used & (win.status == Status.SUCCESS)[:, None]
         status0 = jnp.where(used, status0, Status.REFINE_FAILED)
         return corridor, n, status0.astype(jnp.int32)
 

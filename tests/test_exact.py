@@ -372,3 +372,22 @@ def test_wall_detours_and_eight_starts_reach_the_shortest_class_on_a_scan():
     assert four[3] > ref[3] * (1 + 1e-3)  # pair 56 needs the 8 starts
     assert np.all(before[:3] > ref[:3] * (1 + 1e-4))  # these need the wall detours
     assert np.all(now <= np.minimum(four, before) * (1 + 1e-12))
+
+
+@pytest.mark.slow  # its own compile (max_iterations is static): ~15 s
+def test_no_converged_start_is_a_failure_never_an_empty_path():
+    """When no start converges (here: one flip round allowed, far too few for a
+    path across the sphere), the pair fails. The detour phases used to start from
+    the empty placeholder of such a pair and report its empty corridor as a
+    SUCCESS of length 0 (seen on a 1M-face catenoid, where every start ran out
+    of rounds)."""
+    mesh = unit_icosphere(2)
+    p = jg.shortest_path(
+        mesh, 3, 150, max_points=POINTS, method=jg.Exact(max_iterations=1), throw=False
+    )
+    assert int(p.status) != jg.Status.SUCCESS
+    assert int(p.stats["starts_converged"]) == 0
+    with pytest.raises(jg.JaxgeoError):
+        jg.shortest_path(
+            mesh, 3, 150, max_points=POINTS, method=jg.Exact(max_iterations=1)
+        )
