@@ -656,7 +656,7 @@ def exact_solve(
     *,
     max_points: int,
     max_starts: int = 8,
-    max_iterations: int = 256,
+    max_iterations: int | None = None,
     corridor_capacity: int | None = None,
     detours: int = 16,
     detour_rounds: int = 2,
@@ -668,7 +668,10 @@ def exact_solve(
     loop. jit/vmap/grad-compatible; `status` says whether each path succeeded.
 
     **Arguments:** `max_points`: capacity of the result's buffers; `max_starts`:
-    landmark starts refined per pair; `max_iterations`: flip rounds at most;
+    landmark starts refined per pair; `max_iterations`: flip rounds at most (None:
+    the corridor capacity, at least 256: a start crosses the rows of vertices
+    between it and the geodesic one per round, and finer meshes have more rows;
+    a 1M-face catenoid's pair took 423);
     `corridor_capacity`: faces a corridor may hold (default `max_points`; a pair
     any of whose lanes outgrew it has `stats.outgrew` set, see
     `jaxgeo.methods.first_attempt`); `detours`: after the starts, refine this
@@ -680,6 +683,7 @@ def exact_solve(
     **Returns:** an `ExactResult` with a leading batch axis.
     """
     cap = min(corridor_capacity or max_points, max_points)
+    max_iterations = max_iterations or max(256, cap)
     dtype = mesh.vertices.dtype
     tol = 10 * float(jnp.finfo(dtype).eps) ** 0.5
     s, t = (

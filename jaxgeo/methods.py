@@ -40,7 +40,7 @@ class Exact(eqx.Module):
     `first_attempt`)."""
 
     max_starts: int = 8
-    max_iterations: int = 256
+    max_iterations: int | None = None  # None: the corridor capacity, >= 256
     detours: int = 16
     detour_rounds: int = 2
     walls: bool = True
