@@ -197,27 +197,44 @@ def _carry_over(old, cloths) -> list:
         p = np.asarray(cc.cloth.vertices3d)
         k = int(np.argmin([np.sum((p.mean(0) - c) ** 2) for c in centres]))
         f = faces[k][fmask[k] > 0]
-        a, b, c = (x3[k][f[:, i]] for i in range(3))
-        e1, e2 = b - a, c - a  # (F, 3)
-        g11, g12, g22 = (np.sum(u * v, 1) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
-        det = g11 * g22 - g12**2 + 1e-300
-        q = p[:, None, :] - a[None]  # (n, F, 3)
-        r1, r2 = np.sum(q * e1, 2), np.sum(q * e2, 2)
-        beta = (g22 * r1 - g12 * r2) / det
-        gamma = (g11 * r2 - g12 * r1) / det
-        alpha = 1.0 - beta - gamma
-        off = q - beta[..., None] * e1 - gamma[..., None] * e2
-        size = np.sqrt(g11)
-        outside = sum(np.maximum(-w, 0.0) for w in (alpha, beta, gamma))
-        best = np.argmin(np.sqrt(np.sum(off * off, 2)) + outside * size, axis=1)
-        i = np.arange(len(p))
-        ua, ub, uc = (uv[k][f[best, j]] for j in range(3))
+        # (in blocks of vertices: the search is vertices x triangles)
         starts.append(
-            alpha[i, best, None] * ua
-            + beta[i, best, None] * ub
-            + gamma[i, best, None] * uc
+            np.concatenate(
+                [
+                    _flat_place(p[i : i + _BLOCK], x3[k], uv[k], f)
+                    for i in range(0, len(p), _BLOCK)
+                ]
+            )
         )
     return starts
+
+
+#: vertices placed at a time by `_carry_over` (memory: block x old triangles)
+_BLOCK = 128
+
+
+def _flat_place(p, x3, uv, f):
+    """The flat positions of 3-D points `p` (n, 3): each takes the barycentric
+    place of its nearest triangle `f` of the old cloth (positions `x3`,
+    flattening `uv`), extrapolated a little outside it."""
+    a, b, c = (x3[f[:, i]] for i in range(3))
+    e1, e2 = b - a, c - a  # (F, 3)
+    g11, g12, g22 = (np.sum(u * v, 1) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+    det = g11 * g22 - g12**2 + 1e-300
+    q = p[:, None, :] - a[None]  # (n, F, 3)
+    r1, r2 = np.sum(q * e1, 2), np.sum(q * e2, 2)
+    beta = (g22 * r1 - g12 * r2) / det
+    gamma = (g11 * r2 - g12 * r1) / det
+    alpha = 1.0 - beta - gamma
+    off = q - beta[..., None] * e1 - gamma[..., None] * e2
+    size = np.sqrt(g11)
+    outside = sum(np.maximum(-w, 0.0) for w in (alpha, beta, gamma))
+    best = np.argmin(np.sqrt(np.sum(off * off, 2)) + outside * size, axis=1)
+    i = np.arange(len(p))
+    ua, ub, uc = (uv[f[best, j]] for j in range(3))
+    return (
+        alpha[i, best, None] * ua + beta[i, best, None] * ub + gamma[i, best, None] * uc
+    )
 
 
 def _template(mesh, layout, settings, capacity, previous=None, report=None):
