@@ -683,7 +683,8 @@ def exact_solve(
     **Returns:** an `ExactResult` with a leading batch axis.
     """
     cap = min(corridor_capacity or max_points, max_points)
-    max_iterations = max_iterations or max(256, cap)
+    if max_iterations is None:
+        max_iterations = max(256, cap)
     dtype = mesh.vertices.dtype
     tol = 10 * float(jnp.finfo(dtype).eps) ** 0.5
     s, t = (
