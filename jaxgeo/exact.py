@@ -32,7 +32,10 @@ meshes), several locally shortest paths lie a row or two of vertices apart, and 
 starts may all flip into the same one. The converged best path is then tried again
 from corridors that pass its nearest cone vertices on their other side, one vertex
 each (`_detours`), and corridors moved across a whole stretch of one of its walls
-(`_wall_flip`), in `detour_rounds` rounds.
+(`_wall_flip`), in `detour_rounds` rounds. Each round detours from the best path
+found, or, if that path's detours were tried already, from the best other one (the
+runner-up): two locally shortest paths may differ at two cone vertices, each of
+whose single detours alone gives a longer path.
 
 **Gradients.** The discrete choices (corridor, wrapped vertices) are made under
 `stop_gradient`; the length is then recomputed from the live vertices and endpoint
@@ -678,7 +681,8 @@ def exact_solve(
     many corridors that pass the best path's nearest cone vertices on their other
     side (`_detours`), and with `walls` 8 more that pass a whole stretch of one of
     its walls on the other side (`_wall_flip`), in `detour_rounds` rounds, each
-    from the best path so far.
+    from the best path so far (or the runner-up, once the best one's detours
+    were tried).
 
     **Returns:** an `ExactResult` with a leading batch axis.
     """
@@ -756,11 +760,33 @@ def exact_solve(
         return corridor, n, status0.astype(jnp.int32)
 
     def phase(p, carry):
-        win, found, outgrew, converged, first_status, pending = carry
+        win, alt, expanded, found, outgrew, converged, first_status, pending = carry
         j = (p - 1) % max(chunks, 1)
         if chunks:
+            # detour from the best path, or where its detours were tried already
+            # (no detour of them was shorter), from the runner-up: two locally
+            # shortest paths may differ at two cone vertices, neither of whose
+            # single detours is shorter than the best
+            rnd = (p - 1) // chunks
+            src = jax.tree.map(
+                lambda a, b: jnp.where(
+                    (
+                        _seen(win.length, expanded) & (alt.status == Status.SUCCESS)
+                    ).reshape((n_pairs,) + (1,) * (a.ndim - 1)),
+                    b,
+                    a,
+                ),
+                win,
+                alt,
+            )
+            start_round = (p >= 1) & (j == 0)
             pending = jax.lax.cond(
-                (p >= 1) & (j == 0), lambda: detours_of(win), lambda: pending
+                start_round, lambda: detours_of(src), lambda: pending
+            )
+            expanded = jnp.where(
+                start_round & (jnp.arange(expanded.shape[1]) == rnd)[None],
+                src.length[:, None],
+                expanded,
             )
         part = jax.tree.map(
             lambda x: jax.lax.dynamic_slice_in_dim(x, j * k, k, axis=1).reshape(
@@ -775,12 +801,28 @@ def exact_solve(
             smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol
         )
         lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
-        best, ok = _shortest(lanes)
-        both = jax.tree.map(lambda x, y: jnp.stack([x, y], axis=1), win, best)
-        win, _ = _shortest(both)
+        ok = jnp.any(lanes.status == Status.SUCCESS, axis=1)
+        every = jax.tree.map(
+            lambda x, y, z: jnp.concatenate([x[:, None], y[:, None], z], axis=1),
+            win,
+            alt,
+            lanes,
+        )
+        win, _ = _shortest(every)
+        other = ~_seen(every.length, win.length[:, None, None]) & ~_seen(
+            every.length, expanded[:, None, :]
+        )
+        alt, any_alt = _shortest(every, other)
+        alt = eqx.tree_at(
+            lambda x: x.status,
+            alt,
+            jnp.where(any_alt, alt.status, Status.REFINE_FAILED).astype(jnp.int32),
+        )
         good = lanes.status == Status.SUCCESS
         return (
             win,
+            alt,
+            expanded,
             found | ok,
             outgrew | jnp.any(lanes.status == Status.MAX_STEPS, axis=1),
             jnp.where(p == 0, jnp.sum(good, axis=1, dtype=jnp.int32), converged),
@@ -806,8 +848,10 @@ def exact_solve(
         jnp.zeros((n_pairs, width), jnp.int32),
         jnp.full((n_pairs, width), Status.REFINE_FAILED, jnp.int32),
     )
-    init = (no_win, no, no, jnp.zeros(n_pairs, jnp.int32), no.astype(jnp.int32))
-    win, found, outgrew, converged, first_status, _ = jax.lax.fori_loop(
+    expanded = jnp.full((n_pairs, max(detour_rounds, 1)), jnp.inf, dtype)
+    init = (no_win, no_win, expanded, no, no, jnp.zeros(n_pairs, jnp.int32))
+    init = init + (no.astype(jnp.int32),)
+    win, _, _, found, outgrew, converged, first_status, _ = jax.lax.fori_loop(
         0, phases, phase, init + (pending,)
     )
     status = jnp.where(found, Status.SUCCESS, first_status)
@@ -825,13 +869,20 @@ def exact_solve(
     )
 
 
-def _shortest(lanes: _Lane):
-    """Per pair (axis 0), the shortest successful lane (axis 1), and whether any
-    succeeded."""
-    good = lanes.status == Status.SUCCESS
+def _shortest(lanes: _Lane, mask=True):
+    """Per pair (axis 0), the shortest successful lane (axis 1) among `mask`, and
+    whether any succeeded."""
+    good = (lanes.status == Status.SUCCESS) & mask
     best = jnp.argmin(jnp.where(good, lanes.length, jnp.inf), axis=1)
     rows = jnp.arange(good.shape[0])
     return jax.tree.map(lambda x: x[rows, best], lanes), jnp.any(good, axis=1)
+
+
+def _seen(length, lengths):
+    """Is `length` one of `lengths` (last axis), to rounding? The same locally
+    shortest path, reached from two corridors, has the same length to ~1e-15."""
+    close = jnp.abs(length[..., None] - lengths) <= 1e-12 * jnp.abs(length[..., None])
+    return jnp.any(close & jnp.isfinite(lengths), axis=-1)
 
 
 def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):
