@@ -219,3 +219,47 @@ def test_sparse_flattening_matches_qr_and_its_derivative_the_differences():
     f = jax.jit(lambda x: flat(x, "sparse")[0])
     _, jvp = jax.jvp(f, (x3,), (dx,))
     _assert_jvp_vjp(f, x3, dx, w, jvp)
+
+
+def test_a_flattening_at_a_saddle_is_left_for_a_minimum_or_invalid():
+    """A cloth of a twin-peak cut (`tests/data/saddle_cloth.npz`: 519 vertices,
+    its design positions and the flattening Newton converged to) whose
+    flattening is a saddle of the edge-strain energy: stationary, one Hessian
+    eigenvalue of -14. It crashed the stress optimiser (the implicit derivative's
+    banded Cholesky has no factor there: NaN, and lineax raised). At template
+    time `_converged` steps off the saddle to a minimum; in `evaluate` a
+    flattening that converged to a saddle is not valid (J = +inf, rejected)."""
+    from pathlib import Path
+
+    from jaxgeo.cutting.objective import _converged, _flatten, _host_system
+
+    d = np.load(Path(__file__).parent / "data" / "saddle_cloth.npz")
+    xc, edges, ew, uv = d["xc"], d["edges"], d["ew"], d["uv"]
+    L = np.linalg.norm(xc[edges[:, 0]] - xc[edges[:, 1]], axis=1)
+    sw = np.sqrt(ew) / L
+    ones = np.ones(len(uv))
+
+    def hessian_and_gradient(u):
+        r, A, B, g = _host_system(u, L, sw, edges, ones, uv, True)
+        return A.toarray() + B.T @ B, g, 0.5 * float(r @ r)
+
+    H, g, e_saddle = hessian_and_gradient(uv)
+    # stationary (|grad| ~1e-9 against Hessian entries ~1e7) and not a minimum
+    assert np.linalg.norm(g) < 1e-6 and np.linalg.eigvalsh(H)[0] < -1.0
+
+    u, ok = _converged(xc, edges, ew, uv)
+    H, g, e_min = hessian_and_gradient(u)
+    assert ok and np.linalg.norm(g) < 1e-6
+    assert np.linalg.eigvalsh(H)[0] > 0.0  # a minimum (gauge fixed by B)
+    assert e_min < e_saddle
+
+    # in JAX: the flattening from the saddle stays there and is not valid
+    vmask = jnp.ones(len(uv))
+    band = _band(jnp.asarray(edges), jnp.asarray(ew), vmask, jnp.asarray(uv))
+    _, ok_saddle = jax.jit(lambda x: _flatten(x, edges, ew, vmask, uv, "banded", band))(
+        jnp.asarray(xc)
+    )
+    _, ok_min = jax.jit(lambda x: _flatten(x, edges, ew, vmask, u, "banded", band))(
+        jnp.asarray(xc)
+    )
+    assert not bool(ok_saddle) and bool(ok_min)

@@ -87,3 +87,43 @@ def test_seams_along_mesh_edges_are_held_and_the_others_move():
     held[[0, 3]] = True
     assert not np.any(moved[np.r_[held, held]])
     assert np.any(moved[np.r_[~held, ~held]])
+
+
+@pytest.mark.mistyped  # None for the mesh, template and settings the stand-in ignores
+def test_a_broken_trial_is_infinite_and_its_derivative_is_never_computed(monkeypatch):
+    """A trial outside the template's cell has J = +inf and derivative 0, and its
+    linearisation is never run. Masking alone (`where(valid, J, inf)`) sends a
+    zero cotangent back through the broken trial, where a partial may be
+    infinite (0 * inf = NaN) and reach a lineax solve, which then raises: the
+    crash of the twin-peak optimiser. Here a stand-in `evaluate` has a lineax
+    solve and, at invalid x, a NaN partial behind a `where`."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+    import lineax as lx
+
+    from jaxgeo.cutting import optimise
+
+    def evaluate(x, mesh, template, settings):
+        op = lx.MatrixLinearOperator(jnp.eye(3))
+        y = lx.linear_solve(op, x * jnp.ones(3)).value  # throw=True, as the replay
+        ok = y[0] > 0
+        val = jnp.where(ok, jnp.sqrt(y[0]), 1.0)  # d sqrt(-1) = NaN, masked
+        return val, {"valid": ok, "rms": val, "max": val}
+
+    monkeypatch.setattr(optimise, "evaluate", evaluate)
+
+    def masked(x):  # the old objective
+        val, aux = evaluate(x, None, None, None)
+        return jnp.where(aux["valid"], val, jnp.inf)
+
+    with pytest.raises(eqx.EquinoxRuntimeError, match="non-finite"):
+        eqx.filter_jit(jax.grad(masked))(-1.0)  # (as `_minimise`, filter_jit)
+
+    def j(x):
+        return optimise._in_cell(x, None, None, None)[0]
+
+    for x, value, slope in ((-1.0, np.inf, 0.0), (4.0, 2.0, 0.25)):
+        assert float(j(x)) == value
+        assert float(jax.grad(j)(x)) == slope  # reverse mode, as BFGS's
+        assert float(eqx.filter_jit(jax.grad(j))(x)) == slope

@@ -314,8 +314,43 @@ def _converged(xc, edges, ew, uv):
     for newton in (np.inf, NEWTON_NEAR):  # Newton, else Gauss-Newton first
         u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv, newton, 5 * HOST_STEPS)
         if ok:
-            return u, True
+            return _off_saddles(u, L, sw, edges, uv)
     return uv, False
+
+
+#: `_off_saddles`: escapes tried, the step along the direction of negative
+#: curvature (a fraction of the cloth's size), and the largest cloth checked
+#: (degrees of freedom: its Hessian is checked dense, 128 MB at this size; a
+#: larger one's saddle is found by `evaluate`, whose flattening is then invalid)
+SADDLE_ESCAPES, SADDLE_STEP, SADDLE_MAX_DOFS = 4, 1e-3, 4000
+
+
+def _off_saddles(u, L, sw, edges, uv0):
+    """`u`, a converged flattening, if it is a minimum; else the minimum that
+    Gauss-Newton reaches after a step off the saddle along the Hessian's most
+    negative curvature (at most `SADDLE_ESCAPES` times). Newton converges to any
+    stationary point: on a twin-peak cut it reached a saddle of a 519-vertex
+    cloth (Hessian eigenvalue −14), where the implicit derivative's banded
+    Cholesky has no factor and `evaluate` could not be differentiated.
+    Returns (u, is a minimum)."""
+    ones = np.ones(len(u))
+    if 2 * len(u) > SADDLE_MAX_DOFS:
+        return u, True
+    for _ in range(SADDLE_ESCAPES + 1):
+        _, A, B, _ = _host_system(u, L, sw, edges, ones, uv0, True)
+        H = A.toarray() + B.T @ B
+        try:
+            np.linalg.cholesky(H)
+            return u, True
+        except np.linalg.LinAlgError:
+            pass
+        _, vec = np.linalg.eigh(H)
+        step = SADDLE_STEP * (1.0 + np.max(np.abs(u)))
+        down = u + step * vec[:, 0].reshape(u.shape) / np.max(np.abs(vec[:, 0]))
+        u, ok = _host_newton(L, sw, edges, ones, down, NEWTON_NEAR, 5 * HOST_STEPS)
+        if not ok:
+            return u, False
+    return u, False
 
 
 def _safe_norm(d):
@@ -369,7 +404,13 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="banded", band=None):
     if solver == "banded":
         if band is None:
             raise JaxgeoError("the banded flattening needs the template's band")
-        u, ok = _jax_newton(*jax.lax.stop_gradient((L, sw)), edges, vmask, uv0, *band)
+        Ls, sws = jax.lax.stop_gradient((L, sw))
+        u, ok = _jax_newton(Ls, sws, edges, vmask, uv0, *band)
+        # the derivative solves with the Hessian at u by a banded Cholesky,
+        # which has a factor only at a minimum: at a saddle (Newton converges
+        # to any stationary point) the flattening is not valid
+        probe = _system_solve(u, Ls, sws, edges, vmask, uv0, *band, True, uv0)
+        ok = ok & jnp.all(jnp.isfinite(probe))
         return _implicit(solver, u, L, sw, edges, vmask, uv0, *band), ok
     if solver == "sparse":
         shapes = (

@@ -95,6 +95,40 @@ FRAGILE_MOVE = 1e-6
 SHRINK_STEPS = 16
 
 
+def _in_cell(x, mesh: Mesh, template: Template, settings: Settings):
+    """`(J, rms, max)` of `evaluate` at `x`, with `J = +∞` and a zero derivative
+    outside the template's cell (the template broken, or a solve failed).
+
+    The derivative there is not just masked but never computed: the trial's
+    linearisation runs under `lax.cond` only where the trial is valid. Masking
+    would send a zero cotangent back through the broken trial, whose partials
+    may be infinite or NaN (a cloth's flattening at a saddle of its energy: the
+    implicit derivative's banded Cholesky has no factor there); 0·NaN = NaN then
+    reaches the replay's implicit System (16) solves, whose lineax solve raises
+    (the twin-peak optimiser crashed so) instead of the line search rejecting
+    the step."""
+
+    def parts(x):
+        val, aux = evaluate(x, mesh, template, settings)
+        ok = aux["valid"] & jnp.isfinite(val)
+        return (val, aux["rms"], aux["max"]), ok
+
+    @jax.custom_jvp
+    def f(x):
+        (val, rms, dmax), ok = parts(x)
+        return jnp.where(ok, val, jnp.inf), rms, dmax
+
+    @f.defjvp
+    def f_jvp(primals, tangents):
+        (x,), (tx,) = primals, tangents
+        out, lin, ok = jax.linearize(parts, x, has_aux=True)
+        zero = jax.tree.map(jnp.zeros_like, out)
+        tout = jax.lax.cond(ok, lin, lambda _: zero, tx)
+        return (jnp.where(ok, out[0], jnp.inf), *out[1:]), tout
+
+    return f(x)
+
+
 @eqx.filter_jit
 def _minimise(
     x0: Float[Array, " P"],
@@ -119,10 +153,8 @@ def _minimise(
     r = r * jnp.where(jnp.concatenate([held, held]), 0.0, 1.0)
 
     def j(z, r):
-        x = x0 + r * jnp.tanh(z)
-        val, aux = evaluate(x, mesh, template, settings)
-        ok = aux["valid"] & jnp.isfinite(val)
-        return jnp.where(ok, val, jnp.inf), (aux["rms"], aux["max"])
+        val, rms, dmax = _in_cell(x0 + r * jnp.tanh(z), mesh, template, settings)
+        return val, (rms, dmax)
 
     z0 = jnp.zeros_like(x0)
     (j0, aux0), g0 = jax.value_and_grad(j, has_aux=True)(z0, r)
