@@ -332,7 +332,8 @@ def _off_saddles(u, L, sw, edges, uv0):
     stationary point: on a twin-peak cut it reached a saddle of a 519-vertex
     cloth (Hessian eigenvalue −14), where the implicit derivative's banded
     Cholesky has no factor and `evaluate` could not be differentiated.
-    Returns (u, is a minimum)."""
+    Returns (u, converged): False where the escapes ended on no minimum. A cloth
+    above `SADDLE_MAX_DOFS` is not checked here (`evaluate` finds its saddle)."""
     ones = np.ones(len(u))
     if 2 * len(u) > SADDLE_MAX_DOFS:
         return u, True
