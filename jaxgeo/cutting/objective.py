@@ -410,7 +410,10 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="banded", band=None):
         # the derivative solves with the Hessian at u by a banded Cholesky,
         # which has a factor only at a minimum: at a saddle (Newton converges
         # to any stationary point) the flattening is not valid
-        probe = _system_solve(u, Ls, sws, edges, vmask, uv0, *band, True, uv0)
+        pos, free, shape = band
+        probe = _system_solve(
+            u, Ls, sws, edges, vmask, uv0, pos, free, shape, True, uv0
+        )
         ok = ok & jnp.all(jnp.isfinite(probe))
         return _implicit(solver, u, L, sw, edges, vmask, uv0, *band), ok
     if solver == "sparse":
