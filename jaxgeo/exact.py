@@ -768,17 +768,11 @@ def exact_solve(
             # shortest paths may differ at two cone vertices, neither of whose
             # single detours is shorter than the best
             rnd = (p - 1) // chunks
-            src = jax.tree.map(
-                lambda a, b: jnp.where(
-                    (
-                        _seen(win.length, expanded) & (alt.status == Status.SUCCESS)
-                    ).reshape((n_pairs,) + (1,) * (a.ndim - 1)),
-                    b,
-                    a,
-                ),
-                win,
-                alt,
+            both = jax.tree.map(lambda x, y: jnp.stack([x, y], axis=1), win, alt)
+            fresh = jnp.stack(
+                [~_seen(win.length, expanded), jnp.ones(n_pairs, bool)], 1
             )
+            src, _ = _shortest(both, fresh)  # (win if neither qualifies)
             start_round = (p >= 1) & (j == 0)
             pending = jax.lax.cond(
                 start_round, lambda: detours_of(src), lambda: pending
@@ -849,8 +843,15 @@ def exact_solve(
         jnp.full((n_pairs, width), Status.REFINE_FAILED, jnp.int32),
     )
     expanded = jnp.full((n_pairs, max(detour_rounds, 1)), jnp.inf, dtype)
-    init = (no_win, no_win, expanded, no, no, jnp.zeros(n_pairs, jnp.int32))
-    init = init + (no.astype(jnp.int32),)
+    init = (
+        no_win,
+        no_win,
+        expanded,
+        no,
+        no,
+        jnp.zeros(n_pairs, jnp.int32),
+        no.astype(jnp.int32),
+    )
     win, _, _, found, outgrew, converged, first_status, _ = jax.lax.fori_loop(
         0, phases, phase, init + (pending,)
     )
@@ -869,7 +870,7 @@ def exact_solve(
     )
 
 
-def _shortest(lanes: _Lane, mask=True):
+def _shortest(lanes: _Lane, mask: Bool[Array, "P L"] | bool = True):
     """Per pair (axis 0), the shortest successful lane (axis 1) among `mask`, and
     whether any succeeded."""
     good = (lanes.status == Status.SUCCESS) & mask
