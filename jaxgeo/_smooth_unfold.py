@@ -1,7 +1,8 @@
 """Host-side (numpy) geometry of the eager strip repair
-`jaxgeo.smooth.smooth_shortest_path`: a vertex's fan in order, the two ways round
-it between two of its faces, and where the straight line between a contact's
-neighbours crosses them with the fan unfolded into the plane.
+`jaxgeo.smooth.smooth_shortest_path`: a vertex's fan in order (read from the
+mesh's fan tables, `jaxgeo._fans`), the two ways round it between two of its
+faces, and where the straight line between a contact's neighbours crosses them
+with the fan unfolded into the plane.
 (`jaxgeo._smooth_repair` is the same repair as fixed-shape JAX.)"""
 
 from __future__ import annotations
@@ -12,43 +13,18 @@ import numpy as np
 def vertex_fan(mesh_np: dict, v: int) -> tuple[list[int], list[int], bool]:
     """Faces around vertex v in order, the edge between consecutive faces
     (`edges[j]` joins `faces[j]` and `faces[j + 1]`, cyclically when closed), and
-    whether the fan is closed."""
-    faces, edge_faces, key = mesh_np["faces"], mesh_np["edge_faces"], mesh_np["key"]
-    n_v = mesh_np["n_vertices"]
+    whether the fan is closed.
 
-    def edge_id(a: int, b: int) -> int:
-        a, b = min(a, b), max(a, b)
-        return int(np.searchsorted(key, a * n_v + b))
-
-    def step(f: int, forward: bool) -> tuple[int, int]:
-        i = int(np.flatnonzero(faces[f] == v)[0])
-        w = faces[f, (i + 2) % 3] if forward else faces[f, (i + 1) % 3]
-        e = edge_id(v, int(w))
-        other = edge_faces[e, 0] if edge_faces[e, 0] != f else edge_faces[e, 1]
-        return int(other), e
-
-    start = int(mesh_np["vertex_faces"][v, 0])
-    order, between = [start], []
-    f = start
-    while True:
-        nxt, e = step(f, True)
-        if nxt == start:
-            between.append(e)
-            return order, between, True
-        if nxt < 0:
-            break
-        between.append(e)
-        order.append(nxt)
-        f = nxt
-    # open fan: walk backwards from the start to the other boundary edge
-    f = start
-    while True:
-        prv, e = step(f, False)
-        if prv < 0:
-            return order, between, False
-        order.insert(0, prv)
-        between.insert(0, e)
-        f = prv
+    Read from the mesh's fan tables (`Mesh.fan_faces`, `jaxgeo._fans`):
+    counter-clockwise, an open fan from its boundary edge. Face j, with corners
+    (v, a, b) in its own order, meets face j + 1 across its spoke (v, b): the edge
+    opposite corner a."""
+    n = int(mesh_np["fan_size"][v])
+    closed = bool(mesh_np["fan_closed"][v])
+    order = mesh_np["fan_faces"][v, :n]
+    corner = np.argmax(mesh_np["faces"][order] == v, axis=1)
+    between = mesh_np["face_edges"][order, (corner + 1) % 3]
+    return order.tolist(), between[: n if closed else n - 1].tolist(), closed
 
 
 def fan_arcs(fan, f_in: int, f_out: int) -> list[list[int]]:

@@ -274,13 +274,12 @@ def smooth_shortest_path(
     """
     mesh_np = {
         "faces": np.asarray(mesh.faces),
-        "edges": np.asarray(mesh.edges),
-        "edge_faces": np.asarray(mesh.edge_faces),
-        "vertex_faces": np.asarray(mesh.vertex_faces),
-        "n_vertices": mesh.n_vertices,
+        "face_edges": np.asarray(mesh.face_edges),
+        "fan_faces": np.asarray(mesh.fan_faces),
+        "fan_size": np.asarray(mesh.fan_size),
+        "fan_closed": np.asarray(mesh.fan_closed),
     }
-    edges_np = mesh_np["edges"].astype(np.int64)
-    mesh_np["key"] = edges_np[:, 0] * mesh.n_vertices + edges_np[:, 1]
+    edges_np = np.asarray(mesh.edges, np.int64)
     elements = np.asarray(elements, np.int64).reshape(-1)
     params = np.asarray(params, np.float64).reshape(-1)
     kinds = (
