@@ -104,6 +104,7 @@ LAYERS: dict[str, tuple[set[str], set[str]]] = {
             "pattern",
             "export",
             "cutting",
+            "cutting._least_strain",
             "cutting.compare",
             "cutting.compensate",
             "cutting.cut",

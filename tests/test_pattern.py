@@ -10,7 +10,7 @@ import jaxgeo as jg
 from jaxgeo import seams, surfaces
 from jaxgeo.cli.pattern import main as pattern_main
 from jaxgeo.export import write_dxf, write_seams_obj, write_svg
-from jaxgeo.pattern import cut_mesh, make_pattern, strip_width
+from jaxgeo.pattern import cut_mesh, edge_table, make_pattern, strip_width
 
 # Heavy (compiles several solvers): in the slow set (`pytest -m slow`).
 pytestmark = pytest.mark.slow
@@ -48,6 +48,32 @@ def test_cone_tent_cloths(cone_pattern):
     for c in pat.cloths:  # the flattened seam keeps its 3-D length
         for l3, l2 in c.seam_lengths.values():
             assert abs(l2 - l3) / l3 < 0.005
+
+
+def test_each_cloth_is_flattened_to_a_minimum_of_its_strain(cone_pattern):
+    """`make_pattern` converges every cloth's least-strain fit (Newton steps
+    after the trust-region fit, `_least_strain.converge`): a further Newton
+    solve from its flattening moves no vertex by more than twice the solver's
+    tolerance (`GN_ATOL + GN_RTOL` x the cloth's size bounds the last step of
+    each solve, and Newton's error after it is quadratic in it), and the
+    gauge-fixed Hessian there is positive definite (a minimum, not a saddle)."""
+    from jaxgeo.cutting._least_strain import GN_ATOL, GN_RTOL, converge, system
+
+    _, _, cut, _, pat = cone_pattern
+    for c in pat.cloths:
+        assert c.converged
+        edges, _ = edge_table(c.faces)
+        seam = {frozenset(p) for s in c.seams.values() for p in s.tolist()}
+        ew = np.array([10.0 if frozenset(p) in seam else 1.0 for p in edges.tolist()])
+        again, ok = converge(c.vertices3d, edges, ew, c.uv)
+        size = np.max(np.abs(c.uv))
+        assert ok and np.max(np.abs(again - c.uv)) <= 2 * (GN_ATOL + GN_RTOL * size)
+        L = np.linalg.norm(
+            c.vertices3d[edges[:, 0]] - c.vertices3d[edges[:, 1]], axis=1
+        )
+        ones = np.ones(len(c.uv))
+        _, A, B, _ = system(c.uv, L, np.sqrt(ew) / L, edges, ones, c.uv, True)
+        assert np.linalg.eigvalsh(A.toarray() + B.T @ B)[0] > 0.0
 
 
 def test_cut_mesh_reads_the_seam_ends_from_the_paths(cone_pattern):

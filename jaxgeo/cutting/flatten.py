@@ -2,9 +2,11 @@
 
 1. **Flatten** (`flatten_cloth`): least-squares conformal map (LSCM, Lévy et al.
    2002) by sparse least squares, then the edge-length strain
-   Σ w_e ((|x_i − x_j| − L_e)/L_e)² minimised by `scipy.optimize.least_squares`
-   (seam edges weighted 10×, so the two flattened copies of a seam keep its 3-D
-   length and sew together).
+   Σ w_e ((|x_i − x_j| − L_e)/L_e)² minimised (seam edges weighted 10×, so the
+   two flattened copies of a seam keep its 3-D length and sew together): 30
+   trust-region evaluations of `scipy.optimize.least_squares`, then converged
+   to a minimum by `_least_strain.converge` (Newton steps, off saddles), the
+   flattening the stress objective (`cutting.objective`) starts from.
 2. **Measures** (`make_pattern`): per cloth edge-length strain (max, RMS), area
    change, flattened seam lengths, and the roll width the cloth needs: the
    smallest width of a strip between two parallel lines containing it (rotating
@@ -22,9 +24,10 @@ import dataclasses
 import numpy as np
 import scipy.optimize
 import scipy.sparse as sp
-from jaxtyping import Float
+from jaxtyping import Bool, Float, Int
 from scipy.spatial import ConvexHull
 
+from ._least_strain import converge
 from .cut import CutMesh, edge_table
 
 __all__ = [
@@ -99,8 +102,10 @@ def _signed_areas(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def flatten_cloth(
-    V: np.ndarray, F: np.ndarray, seam_mask: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+    V: Float[np.ndarray, "V 3"],
+    F: Int[np.ndarray, "F 3"],
+    seam_mask: Bool[np.ndarray, " E"] | None = None,
+) -> tuple[Float[np.ndarray, "V 2"], Int[np.ndarray, "E 2"]]:
     """Flatten a disk-like cloth `(V, F)`: LSCM, then least edge-length strain.
 
     **Arguments:** `seam_mask` marks, per unique edge (`edge_table(F)` order),
@@ -109,6 +114,12 @@ def flatten_cloth(
     **Returns:** `(uv, edges)`: the 2-D positions `(V, 2)` (orientation
     preserved: positive signed areas) and the unique edges used.
     """
+    uv, edges, _ = _flatten(V, F, seam_mask)
+    return uv, edges
+
+
+def _flatten(V, F, seam_mask):
+    """`flatten_cloth`, and whether the strain fit converged to a minimum."""
     uv = _lscm(V, F)
     if np.sum(_signed_areas(uv, F)) < 0:
         uv[:, 1] *= -1
@@ -116,10 +127,10 @@ def flatten_cloth(
     L = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
     l2 = np.linalg.norm(uv[edges[:, 0]] - uv[edges[:, 1]], axis=1)
     uv *= np.sum(L * l2) / np.sum(l2 * l2)  # best uniform scale
-    w = np.ones(len(edges))
+    ew = np.ones(len(edges))
     if seam_mask is not None:
-        w[seam_mask] = SEAM_WEIGHT
-    w = np.sqrt(w) / L
+        ew[seam_mask] = SEAM_WEIGHT
+    w = np.sqrt(ew) / L
     i, j = edges[:, 0], edges[:, 1]
     n = len(V)
 
@@ -148,7 +159,8 @@ def flatten_cloth(
         max_nfev=30,
         tr_solver="lsmr",
     )
-    return sol.x.reshape(n, 2), edges
+    uv, converged = converge(V, edges, ew, sol.x.reshape(n, 2))
+    return uv, edges, bool(converged)
 
 
 def strip_width(points: Float[np.ndarray, "N 2"]) -> tuple[float, float]:
@@ -192,6 +204,9 @@ class Cloth:
     seam_lengths: dict[int, tuple[float, float]]
     #: the cloth's vertices as ids of `CutMesh.vertices`
     vertex_ids: np.ndarray | None = None
+    #: whether its flattening converged to a minimum of the strain energy
+    #: (else it is the trust-region fit's, `flatten_cloth`)
+    converged: bool = True
 
     def summary(self) -> dict:
         return {
@@ -199,6 +214,7 @@ class Cloth:
             "strain_max": self.strain_max,
             "strain_rms": self.strain_rms,
             "area_change": self.area_change,
+            "converged": self.converged,
             "seams": sorted(self.seams),
             "seam_lengths": {int(k): list(v) for k, v in self.seam_lengths.items()},
         }
@@ -271,7 +287,7 @@ def make_pattern(cut: CutMesh) -> Pattern:
                 for (a, b), e in zip(gl.tolist(), edges.tolist())
             ]
         )
-        uv, _ = flatten_cloth(V, Fl, sid >= 0)
+        uv, _, converged = _flatten(V, Fl, sid >= 0)
         L = np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]], axis=1)
         l2 = np.linalg.norm(uv[edges[:, 0]] - uv[edges[:, 1]], axis=1)
         strain = np.abs(l2 - L) / L
@@ -302,6 +318,7 @@ def make_pattern(cut: CutMesh) -> Pattern:
                 float(area_change),
                 lengths,
                 used,
+                converged,
             )
         )
     return Pattern(cut, cloths)

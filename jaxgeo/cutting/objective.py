@@ -48,6 +48,8 @@ from ..geodesic import shortest_path
 from ..mesh import Mesh
 from ..methods import Method
 from ..path import Status
+from . import _least_strain as strain
+from ._least_strain import GN_ATOL, GN_RTOL, HOST_STEPS, NEWTON_NEAR, STALL_TOL
 from .compensate import CutCloth
 from .material import Material, Prestress
 from .reassembly import biot_strain, deviation
@@ -55,17 +57,9 @@ from .reassembly import biot_strain, deviation
 __all__ = ["Settings", "Template", "evaluate", "make_template", "trace_seams"]
 
 INSET = 1e-6  # as jaxgeo.seams.INSET
-#: Gauss-Newton steps of the flattening (all solvers), and its tolerances
-#: (solver "sparse"; optimistix's Cauchy test, max norm, as "qr")
+#: Gauss-Newton steps of the flattening (solvers "qr", "lsmr"); the other
+#: tolerances and step counts are `_least_strain`'s (`GN_RTOL`, ...)
 GN_STEPS = 30
-GN_RTOL, GN_ATOL = 1e-10, 1e-12
-#: steps of solver "sparse" (cheap: one or two sparse LUs each)
-HOST_STEPS = 100
-#: its Newton steps start when a Gauss-Newton step is this small (relative)
-NEWTON_NEAR = 1e-5
-#: a step this small (relative) that lowers E nowhere ends the Newton loop as
-#: converged
-STALL_TOL = 1e-8
 
 
 class Settings(eqx.Module):
@@ -253,18 +247,18 @@ def make_template(
         if 2 * band + 2 > cap.block:
             raise JaxgeoError("a cloth's bandwidth outgrew the template's block")
         xk, ek = x3[c.vertex_ids], ew[k, : len(e)]
-        uv_k, _ = _converged(xk, e, ek, c.uv)
+        uv_k, _ = strain.converge(xk, e, ek, c.uv)
         a, e_fresh, e_start, kept = (
             cc.warp_angle,
-            _edge_energy(xk, e, ek, uv_k),
+            strain.edge_energy(xk, e, ek, uv_k),
             np.nan,
             False,
         )
         if starts is not None and starts[k] is not None:
             from .compensate import principal_angle
 
-            uv_s, ok = _converged(xk, e, ek, np.asarray(starts[k], np.float64))
-            e_start = _edge_energy(xk, e, ek, uv_s)
+            uv_s, ok = strain.converge(xk, e, ek, np.asarray(starts[k], np.float64))
+            e_start = strain.edge_energy(xk, e, ek, uv_s)
             if ok:  # continue the start's branch
                 uv_k, a, kept = uv_s, principal_angle(uv_s, f), True
         if report is not None:
@@ -288,70 +282,6 @@ def make_template(
         blocks=jnp.zeros((-(-2 * cap.cloth_vertices // cap.block), cap.block)),
     )
     return t, cap
-
-
-def _edge_energy(xc, edges, ew, uv):
-    """1/2 sum of the squared weighted edge-length residuals of a flattening
-    (`_residuals`' edge part, numpy)."""
-    L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
-    d = np.sqrt(np.sum((uv[edges[:, 0]] - uv[edges[:, 1]]) ** 2, 1) + 1e-30)
-    return 0.5 * float(np.sum(ew / L**2 * (d - L) ** 2))
-
-
-def _converged(xc, edges, ew, uv):
-    """The flattening of `evaluate` at the template layout, converged from `uv`
-    (`jaxgeo.pattern`'s) by Newton steps from the start (Gauss-Newton did not
-    converge in 100 steps on the twin-peak's large cloths; on one of them
-    after an optimiser round Newton needed over 100), else by Gauss-Newton
-    first, else `uv`; 500 steps at most (~10 ms each).
-    `evaluate` starts there: at nearby layouts it then stays on this optimum's
-    branch. From `make_pattern`'s flattening (30 function evaluations, not
-    converged on the twin-peak tent's two large cloths) Newton reached other
-    local optima at layouts 1e-6 apart: J jumped between 131, 157 and 323
-    (central differences off by 30x). Returns (uv, converged)."""
-    L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
-    sw = np.sqrt(ew) / L
-    for newton in (np.inf, NEWTON_NEAR):  # Newton, else Gauss-Newton first
-        u, ok = _host_newton(L, sw, edges, np.ones(len(uv)), uv, newton, 5 * HOST_STEPS)
-        if ok:
-            return _off_saddles(u, L, sw, edges, uv)
-    return uv, False
-
-
-#: `_off_saddles`: escapes tried, the step along the direction of negative
-#: curvature (a fraction of the cloth's size), and the largest cloth checked
-#: (degrees of freedom: its Hessian is checked dense, 128 MB at this size; a
-#: larger one's saddle is found by `evaluate`, whose flattening is then invalid)
-SADDLE_ESCAPES, SADDLE_STEP, SADDLE_MAX_DOFS = 4, 1e-3, 4000
-
-
-def _off_saddles(u, L, sw, edges, uv0):
-    """`u`, a converged flattening, if it is a minimum; else the minimum that
-    Gauss-Newton reaches after a step off the saddle along the Hessian's most
-    negative curvature (at most `SADDLE_ESCAPES` times). Newton converges to any
-    stationary point: on a twin-peak cut it reached a saddle of a 519-vertex
-    cloth (Hessian eigenvalue −14), where the implicit derivative's banded
-    Cholesky has no factor and `evaluate` could not be differentiated.
-    Returns (u, converged): False where the escapes ended on no minimum. A cloth
-    above `SADDLE_MAX_DOFS` is not checked here (`evaluate` finds its saddle)."""
-    ones = np.ones(len(u))
-    if 2 * len(u) > SADDLE_MAX_DOFS:
-        return u, True
-    for _ in range(SADDLE_ESCAPES + 1):
-        _, A, B, _ = _host_system(u, L, sw, edges, ones, uv0, True)
-        H = A.toarray() + B.T @ B
-        try:
-            np.linalg.cholesky(H)
-            return u, True
-        except np.linalg.LinAlgError:
-            pass
-        _, vec = np.linalg.eigh(H)
-        step = SADDLE_STEP * (1.0 + np.max(np.abs(u)))
-        down = u + step * vec[:, 0].reshape(u.shape) / np.max(np.abs(vec[:, 0]))
-        u, ok = _host_newton(L, sw, edges, ones, down, NEWTON_NEAR, 5 * HOST_STEPS)
-        if not ok:
-            return u, False
-    return u, False
 
 
 def _safe_norm(d):
@@ -422,7 +352,7 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="banded", band=None):
             jax.ShapeDtypeStruct((), jnp.bool_),
         )
         u, ok = jax.pure_callback(
-            _host_newton,
+            strain.newton,
             shapes,
             *jax.lax.stop_gradient((L, sw)),
             edges,
@@ -449,7 +379,7 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="banded", band=None):
 
 
 # ------------------------------------------- the banded flattening (JAX native)
-# The same Newton iteration as `_host_newton`, in JAX with fixed shapes (jit,
+# The same Newton iteration as `_least_strain.newton`, in JAX with fixed shapes (jit,
 # vmap, grad; GPU as CPU). The edge part of the system (Gauss-Newton J^T J or
 # the Hessian) couples the two ends of an edge only; in each cloth's reverse
 # Cuthill-McKee order (`_order`) it is banded, so it is stored as block-
@@ -625,7 +555,7 @@ def _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, full, b):
 
 
 def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
-    """`_host_newton` in JAX (`lax.while_loop`, fixed shapes): Gauss-Newton
+    """`_least_strain.newton` in JAX (`lax.while_loop`, fixed shapes): Gauss-Newton
     steps with a backtracking Armijo line search; Newton steps (the Hessian)
     once the last step was below `newton` times the cloth's size, where the
     Hessian is positive definite and its step descends (else that iteration
@@ -654,12 +584,13 @@ def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
         du = jnp.where(finite, du, 0.0)
         new = u + du
         e1 = energy(new)
-        conv = (
-            ~bad
-            & ~fail
-            & (step < GN_ATOL + GN_RTOL * jnp.max(jnp.abs(new)))
-            & (jnp.abs(e1 - e0) <= GN_RTOL * e0)
+        # a Newton step passes below STALL_TOL (`_least_strain.STALL_TOL`)
+        tol = jnp.where(
+            use_newton & ~bad,
+            STALL_TOL * (1.0 + jnp.max(jnp.abs(new))),
+            GN_ATOL + GN_RTOL * jnp.max(jnp.abs(new)),
         )
+        conv = ~bad & ~fail & (step < tol) & (jnp.abs(e1 - e0) <= GN_RTOL * e0)
 
         def ls_cond(c):
             t, e = c
@@ -697,156 +628,6 @@ def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
     return st["u"], st["ok"]
 
 
-# ------------------------------------------------- the sparse flattening (host)
-# The flattening's least squares: r_e = s_e (|u_i - u_j| - L_e) over the edges,
-# r_p = u on padded vertices, and three linear gauge rows B u - b. Its normal
-# matrix J^T J (and its Hessian) couple only the two ends of an edge: sparse,
-# ~8 nonzeros per row, but for B^T B (rank 3, dense). A step solves the bordered
-# system [[A, B^T], [B, -I]] [du; y] = [g; 0] (A the sparse part; y = B du), so
-# B^T B is never formed; `splu` factors it in O(ms) for a 1000-vertex cloth, where
-# a dense QR of the Jacobian takes ~1e10 flops.
-
-
-def _host_system(u, L, sw, edges, vmask, uv0, full):
-    """Residuals `r` (as `_residuals`, flattened), the matrix `A` of the sparse
-    part (Gauss-Newton's J^T J, or with `full` the Hessian of 1/2 |r|^2) and the
-    dense rows `B`, `J^T r`, for one cloth (numpy)."""
-    import scipy.sparse as sp
-
-    u = np.asarray(u, np.float64)
-    n = len(u)
-    live = np.flatnonzero(np.asarray(sw) != 0)
-    i, j = edges[live, 0], edges[live, 1]
-    s, Le = np.asarray(sw)[live], np.asarray(L)[live]
-    d = u[i] - u[j]
-    dn = np.sqrt(np.sum(d * d, 1) + 1e-30)
-    nrm = d / dn[:, None]
-    r_e = s * (dn - Le)
-    # per edge the 2x2 Hessian block of 1/2 r_e^2 in d (Gauss-Newton: s^2 n n^T)
-    blk = (s * s)[:, None, None] * nrm[:, :, None] * nrm[:, None, :]
-    if full:
-        t = (s * s * (dn - Le) / dn)[:, None, None]
-        blk = blk + t * (np.eye(2) - nrm[:, :, None] * nrm[:, None, :])
-    ci, cj = 2 * i[:, None] + np.arange(2), 2 * j[:, None] + np.arange(2)
-    rows, cols, vals = [], [], []
-    for a, sa in ((ci, 1.0), (cj, -1.0)):
-        for b, sb in ((ci, 1.0), (cj, -1.0)):
-            rows.append(np.repeat(a, 2, 1).ravel())
-            cols.append(np.tile(b, (1, 2)).ravel())
-            vals.append((sa * sb * blk).ravel())
-    pad = np.flatnonzero(np.repeat(np.asarray(vmask) == 0, 2))
-    rows.append(pad)
-    cols.append(pad)
-    vals.append(np.ones(len(pad)))
-    A = sp.csc_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-        shape=(2 * n, 2 * n),
-    )
-    # gauge rows: centroid (x, y) and mean rotation, as _residuals
-    vm = np.asarray(vmask, np.float64)
-    nv = vm.sum()
-    c0 = (uv0 * vm[:, None]).sum(0) / nv
-    r0 = (uv0 - c0) * vm[:, None]
-    scale = np.sqrt(np.sum(r0 * r0))
-    B = np.zeros((3, n, 2))
-    B[0, :, 0] = B[1, :, 1] = vm / (nv * scale)
-    B[2, :, 0], B[2, :, 1] = -r0[:, 1] / scale**2, r0[:, 0] / scale**2
-    B = B.reshape(3, 2 * n)
-    r_g = B @ u.ravel() - np.append(c0 / scale, 0.0)
-    pins = (1.0 - vm)[:, None] * u
-    g = np.zeros((n, 2))  # J^T r
-    w = (s * r_e)[:, None] * nrm
-    np.add.at(g, i, w)
-    np.add.at(g, j, -w)
-    g = g.ravel() + pins.ravel() + B.T @ r_g
-    r = np.concatenate([r_e, pins.ravel(), r_g])
-    return r, A, B, g
-
-
-def _host_solve(A, B, b):
-    """Solve (A + B^T B) x = b by the bordered sparse system."""
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import splu
-
-    K = sp.bmat([[A, sp.csc_matrix(B.T)], [sp.csc_matrix(B), -sp.identity(3)]])
-    return splu(K.tocsc()).solve(np.append(b, np.zeros(3)))[: A.shape[0]]
-
-
-def _energy_np(r):
-    return 0.5 * float(r @ r)
-
-
-def _host_newton(L, sw, edges, vmask, uv0, newton=NEWTON_NEAR, steps=HOST_STEPS):
-    """The flattening from the template's flat cloth `uv0` on the host:
-    Gauss-Newton steps (one sparse LU each), with a backtracking (Armijo) line
-    search; once a Gauss-Newton step is below `newton` times the cloth's size,
-    Newton steps (the Hessian of 1/2 |r|^2) where they descend. At most
-    `steps` steps, converged when a full step is below the tolerance.
-
-    Gauss-Newton first, as optimistix's (solver "qr"): it finds the same
-    optimum. Newton from the start reached another local optimum on a
-    four-point sail cloth at a line-search trial of the optimiser (J 4.23
-    against 0.386) and so rejected the step that QR took. Newton near the end:
-    Gauss-Newton converges only linearly where the residuals are not small (on
-    the twin-peak tent 4 of 16 cloths took over 30 steps, and its two
-    520-vertex cloths stalled at steps of 1.6e-3 without the line search).
-    Returns (u, converged)."""
-    edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
-    u = uv0.copy()
-    for _ in range(steps):
-        r, A, B, g = _host_system(u, L, sw, edges, vmask, uv0, False)
-        e0 = _energy_np(r)
-        if not np.isfinite(e0):
-            break
-        try:
-            du = -_host_solve(A, B, g)
-        except RuntimeError:  # singular
-            break
-        if np.max(np.abs(du)) < newton * (1.0 + np.max(np.abs(u))):
-            _, A, B, _ = _host_system(u, L, sw, edges, vmask, uv0, True)
-            try:
-                dn = -_host_solve(A, B, g)
-            except RuntimeError:  # singular Hessian
-                dn = du
-            if g @ dn < 0:  # a descent direction: Newton's step
-                du = dn
-        du = du.reshape(u.shape)
-        # converged: the full (Newton) step, the distance to the optimum, is
-        # below GN_ATOL + GN_RTOL max|u| (the cloth's size), and E changes by
-        # at most GN_RTOL E. (Not optimistix's test, per coordinate and on
-        # every residual: the Newton step's roundoff, ~5e-12 on a twin-peak
-        # cloth, exceeds 1e-12 + 1e-10 |u_i| near the origin, and with edge
-        # weights 1/L ~ 100 it moves residuals of ~1e-3 by more than
-        # 1e-12 + 1e-10 |r|: 3 of its 16 cloths never passed it.)
-        new = u + du
-        r_new = _host_system(new, L, sw, edges, vmask, uv0, False)[0]
-        size = np.max(np.abs(new))
-        if np.max(np.abs(du)) < GN_ATOL + GN_RTOL * size and (
-            abs(_energy_np(r_new) - e0) <= GN_RTOL * e0
-        ):
-            return new, np.bool_(True)
-        slope, t = float(g @ du.ravel()), 1.0
-        while _energy_np(r_new) > e0 + 1e-4 * t * slope:
-            t *= 0.5
-            if t < 1e-8:
-                # no lower E along the step: at the optimum to roundoff if the
-                # step is (an ill-conditioned Hessian's noise, ~1e-11 on one
-                # twin-peak cloth), else stuck
-                small = np.max(np.abs(du)) <= STALL_TOL * (1.0 + np.max(np.abs(u)))
-                return u, np.bool_(small)
-            new = u + t * du
-            r_new = _host_system(new, L, sw, edges, vmask, uv0, False)[0]
-        u = new
-    return u, np.bool_(False)
-
-
-def _host_hessian_solve(u, L, sw, edges, vmask, uv0, b):
-    """The Hessian of 1/2 |r|^2 at `u` applied inversely to `b` (the adjoint)."""
-    edges, uv0 = np.asarray(edges), np.asarray(uv0, np.float64)
-    _, A, B, _ = _host_system(u, L, sw, edges, vmask, uv0, True)
-    return _host_solve(A, B, np.asarray(b, np.float64).ravel()).reshape(b.shape)
-
-
 @partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _implicit(solver, u, L, sw, edges, vmask, uv0, pos, free, shape):
     """`u` (the flattening's optimum for `L`, `sw`), with the tangent of the
@@ -876,7 +657,7 @@ def _implicit_jvp(solver, primals, tangents):
         if solver == "banded":
             return _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, True, b)
         return jax.pure_callback(
-            _host_hessian_solve,
+            strain.hessian_solve,
             jax.ShapeDtypeStruct(b.shape, b.dtype),
             u,
             L,
