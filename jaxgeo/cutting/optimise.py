@@ -277,7 +277,9 @@ def _template(mesh, layout, settings, capacity, previous=None, report=None):
     flattening branch the last round tracked: the flattening of a cloth far
     from developable has several local optima, and a fresh start from
     `make_pattern`'s can land on another (twin-peak tent: 0.6 % lower
-    edge-strain energy, 4.5 times the RMS stress deviation; docs)."""
+    edge-strain energy, 4.5 times the RMS stress deviation; docs). Returns
+    `(template, capacity, cloths whose make_pattern flattening did not
+    converge)`."""
     from ..trace import TraceOptions
     from .cut import cut
     from .flatten import make_pattern
@@ -285,24 +287,27 @@ def _template(mesh, layout, settings, capacity, previous=None, report=None):
     options = TraceOptions(candidates="local", max_points=settings.max_points)
     c, paths = cut(mesh, layout, options, settings.method)
     cw, cf = settings.compensation
-    cloths = compensate_pattern(make_pattern(c), Compensation(100 * cw, 100 * cf))
+    pattern = make_pattern(c)
+    cloths = compensate_pattern(pattern, Compensation(100 * cw, 100 * cf))
     starts = None
     if previous is not None:
         old, x = previous
         x3, uv, valid = _flat_at(jnp.asarray(x), mesh, old, settings)
         if bool(valid):
             starts = _carry_over((x3, uv, old.faces, old.fmask), cloths)
+    unconverged = [k for k, cl in enumerate(pattern.cloths) if not cl.converged]
     try:
-        return make_template(
+        t, cap = make_template(
             mesh, layout, paths, c, cloths, capacity, starts=starts, report=report
         )
     except JaxgeoError:
         if capacity is None:
             raise
         # a cloth outgrew the first round's capacities: a new (compiled) size
-        return make_template(
+        t, cap = make_template(
             mesh, layout, paths, c, cloths, None, starts=starts, report=report
         )
+    return t, cap, unconverged
 
 
 def optimise_seams(
@@ -339,7 +344,7 @@ def optimise_seams(
     current, capacity, history, previous = layout, None, [], None
     for k in range(rounds):
         kept: list = []
-        template, capacity = _template(
+        template, capacity, unconverged = _template(
             mesh, current, settings, capacity, previous, kept
         )
         x0 = jnp.asarray(current.x)
@@ -354,9 +359,16 @@ def optimise_seams(
             log(f"round {k + 1}: the objective is not finite at its start; stopped")
             break
         if not np.isfinite(float(start[0])):
+            why = (
+                f"; the least-strain flattening of cloths {unconverged} did not "
+                "converge (e.g. sliver triangles where a seam passes very close "
+                "to a mesh vertex)"
+                if unconverged
+                else ""
+            )
             raise JaxgeoError(
                 "the stress objective is not finite at the start layout (a seam "
-                "or a cloth's flattening failed)"
+                f"or a cloth's flattening failed){why}"
             )
         rec = {
             "j_start": float(start[0]),
