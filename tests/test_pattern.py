@@ -54,17 +54,21 @@ def test_each_cloth_is_flattened_to_a_minimum_of_its_strain(cone_pattern):
     """`make_pattern` converges every cloth's least-strain fit (Newton steps
     after the trust-region fit, `_least_strain.converge`): a further Newton
     solve from its flattening moves no vertex by more than twice the solver's
-    tolerance (`GN_ATOL + GN_RTOL` x the cloth's size bounds the last step of
-    each solve, and Newton's error after it is quadratic in it), and the
-    gauge-fixed Hessian there is positive definite (a minimum, not a saddle)."""
+    tolerance for a Gauss-Newton step (`GN_ATOL + GN_RTOL` x the cloth's size:
+    the move is the first solve's remaining error, quadratic in its last
+    Newton step, or at most its last Gauss-Newton step), and the gauge-fixed
+    Hessian there is positive definite (a minimum, not a saddle)."""
     from jaxgeo.cutting._least_strain import GN_ATOL, GN_RTOL, converge, system
+    from jaxgeo.cutting.flatten import SEAM_WEIGHT
 
-    _, _, cut, _, pat = cone_pattern
+    _, _, _, _, pat = cone_pattern
     for c in pat.cloths:
         assert c.converged
         edges, _ = edge_table(c.faces)
         seam = {frozenset(p) for s in c.seams.values() for p in s.tolist()}
-        ew = np.array([10.0 if frozenset(p) in seam else 1.0 for p in edges.tolist()])
+        ew = np.array(
+            [SEAM_WEIGHT if frozenset(p) in seam else 1.0 for p in edges.tolist()]
+        )
         again, ok = converge(c.vertices3d, edges, ew, c.uv)
         size = np.max(np.abs(c.uv))
         assert ok and np.max(np.abs(again - c.uv)) <= 2 * (GN_ATOL + GN_RTOL * size)

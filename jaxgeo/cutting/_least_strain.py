@@ -193,11 +193,15 @@ def hessian_solve(u, L, sw, edges, vmask, uv0, b):
     return solve(A, B, np.asarray(b, np.float64).ravel()).reshape(b.shape)
 
 
+def _lengths(x, edges):
+    """Edge lengths of positions `x` (2-D or 3-D), safe at zero as `system`'s."""
+    return np.sqrt(np.sum((x[edges[:, 0]] - x[edges[:, 1]]) ** 2, 1) + 1e-30)
+
+
 def edge_energy(xc, edges, ew, uv):
     """1/2 sum of the squared weighted edge-length residuals of a flattening
     (`system`'s edge residuals)."""
-    L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
-    d = np.sqrt(np.sum((uv[edges[:, 0]] - uv[edges[:, 1]]) ** 2, 1) + 1e-30)
+    L, d = _lengths(xc, edges), _lengths(uv, edges)
     return 0.5 * float(np.sum(ew / L**2 * (d - L) ** 2))
 
 
@@ -214,7 +218,7 @@ def converge(xc, edges, ew, uv):
     Newton from there reached other local optima at layouts 1e-6 apart (J
     jumped between 131, 157 and 323, central differences off by 30x), and the
     stress check moved with 1-ulp changes of the cut. Returns (uv, converged)."""
-    L = np.sqrt(np.sum((xc[edges[:, 0]] - xc[edges[:, 1]]) ** 2, 1) + 1e-30)
+    L = _lengths(xc, edges)
     sw = np.sqrt(ew) / L
     for near in (np.inf, NEWTON_NEAR):  # Newton, else Gauss-Newton first
         u, ok = newton(L, sw, edges, np.ones(len(uv)), uv, near, 5 * HOST_STEPS)
