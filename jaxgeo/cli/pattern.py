@@ -286,6 +286,16 @@ def run_pattern(args: argparse.Namespace) -> int:
         f"(roll {args.roll_width} m); stress deviation RMS {total['rms']:.3g} kN/m, "
         f"max {total['max']:.3g} kN/m; written to {out}"
     )
+    folded = [(p.name, c.cloth.inverted) for p, c in zip(pieces, cloths)]
+    folded = [(name, n) for name, n in folded if n]
+    if folded:
+        print(
+            "jaxgeo pattern: warning: the flattening of "
+            + ", ".join(f"cloth {name} ({n} triangles)" for name, n in folded)
+            + " folds over itself (inverted triangles): too curved to lie flat "
+            "without folds; more seams through it would split it",
+            file=sys.stderr,
+        )
     if not fits:
         n = layout.n_seams
         suggest = math.ceil(args.seams * widths[k] / args.roll_width)

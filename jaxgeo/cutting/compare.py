@@ -67,8 +67,9 @@ def cases() -> list[Case]:
 
 def measure(mesh, layout, compensation: Compensation, method: Method) -> dict:
     """Stress deviation (max, RMS; kN/m), widest cloth of `layout`'s pattern,
-    and how many of its cloths' flattenings did not converge (`Cloth.converged`:
-    such a cloth is measured on its trust-region fit)."""
+    how many of its cloths' flattenings did not converge (`Cloth.converged`:
+    such a cloth is measured on its trust-region fit) and how many flat
+    triangles are inverted (`Cloth.inverted`: folds, in how many cloths)."""
     cut, _ = cut_layout(mesh, layout, TraceOptions("local", 160), method)
     pat = make_pattern(cut)
     cloths = compensate_pattern(pat, compensation)
@@ -78,6 +79,8 @@ def measure(mesh, layout, compensation: Compensation, method: Method) -> dict:
         "rms": total["rms"],
         "widest": float(pat.widths.max()),
         "unconverged": sum(not c.converged for c in pat.cloths),
+        "inverted": sum(c.inverted for c in pat.cloths),
+        "folded": sum(c.inverted > 0 for c in pat.cloths),
     }
 
 
@@ -134,8 +137,8 @@ def run(
 def table(rows: list[dict]) -> str:
     out = [
         "| surface | seams | max (kN/m) | RMS (kN/m) | RMS vs uniform "
-        "| widest cloth (m) | cloths not converged |",
-        "|---|---|---|---|---|---|---|",
+        "| widest cloth (m) | cloths not converged | inverted triangles (cloths) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     names = {"uniform": "uniform", "width": "width-only", "stress": "stress-optimised"}
     for r in rows:
@@ -145,7 +148,7 @@ def table(rows: list[dict]) -> str:
             out.append(
                 f"| {r['case']} | {label} | {m['max']:.3g} | {m['rms']:.4g} | "
                 f"{100 * (m['rms'] / base - 1):+.1f} % | {m['widest']:.3f} | "
-                f"{m['unconverged']} |"
+                f"{m['unconverged']} | {m['inverted']} ({m['folded']}) |"
             )
     return "\n".join(out)
 

@@ -189,6 +189,11 @@ class Cloth:
     - `seams`: seam id → list of its edges in this cloth (vertex pairs).
     - `width`: the roll width it needs; `strain_max`, `strain_rms`: edge-length
       strain |l₂ − l₃|/l₃; `area_change`: A₂/A₃ − 1.
+    - `inverted`: how many of its flat triangles are inverted (negative signed
+      area): the flat cloth folds over itself there and cannot be cut as
+      flattened (an edge-length strain has the same value on a triangle and
+      its mirror image, so a cloth too curved to lie flat can fold at its
+      boundary at a minimum); more seams through it are the remedy.
     - `seam_lengths`: seam id → (3-D length, flattened length).
     """
 
@@ -207,6 +212,8 @@ class Cloth:
     #: whether its flattening converged to a minimum of the strain energy
     #: (else it is the trust-region fit's, `flatten_cloth`)
     converged: bool = True
+    #: its flat triangles with negative signed area (folds)
+    inverted: int = 0
 
     def summary(self) -> dict:
         return {
@@ -215,6 +222,7 @@ class Cloth:
             "strain_rms": self.strain_rms,
             "area_change": self.area_change,
             "converged": self.converged,
+            "inverted_triangles": self.inverted,
             "seams": sorted(self.seams),
             "seam_lengths": {int(k): list(v) for k, v in self.seam_lengths.items()},
         }
@@ -294,7 +302,8 @@ def make_pattern(cut: CutMesh) -> Pattern:
         a3 = 0.5 * np.linalg.norm(
             np.cross(V[Fl[:, 1]] - V[Fl[:, 0]], V[Fl[:, 2]] - V[Fl[:, 0]]), axis=1
         )
-        area_change = _signed_areas(uv, Fl).sum() / a3.sum() - 1
+        signed = _signed_areas(uv, Fl)
+        area_change = signed.sum() / a3.sum() - 1
         width, angle = strip_width(uv)
         rot = np.array(
             [[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]]
@@ -319,6 +328,7 @@ def make_pattern(cut: CutMesh) -> Pattern:
                 lengths,
                 used,
                 converged,
+                int(np.sum(signed < 0)),
             )
         )
     return Pattern(cut, cloths)
