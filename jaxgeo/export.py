@@ -18,6 +18,7 @@ from .cutting.export import LAYERS, write_dxf as _write_dxf, write_svg as _write
 from .cutting.fabricate import Piece, make_pieces
 from .cutting.flatten import Pattern
 from .cutting.material import Compensation
+from .io import obj_polylines
 
 __all__ = [
     "LAYERS",
@@ -55,12 +56,8 @@ def write_svg(pattern: Pattern | list[Piece], path: str | os.PathLike) -> None:
 
 
 def write_seams_obj(polylines: list[np.ndarray], path: str | os.PathLike) -> None:
-    """Write 3-D seam polylines as OBJ `v`/`l` records, one `l` per seam."""
-    lines, base = [], 1
-    for k, pl in enumerate(polylines):
-        lines.append(f"o seam_{k}")
-        lines += [f"v {x:.12g} {y:.12g} {z:.12g}" for x, y, z in pl]
-        lines.append("l " + " ".join(str(base + i) for i in range(len(pl))))
-        base += len(pl)
+    """Write 3-D seam polylines as OBJ, one object `seam_K` and `l` element per
+    seam (`jaxgeo.io.obj_polylines`)."""
+    names = [f"seam_{k}" for k in range(len(polylines))]
     with open(path, "w") as f:
-        f.write("\n".join(lines) + "\n")
+        f.write(obj_polylines(polylines, names))

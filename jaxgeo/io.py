@@ -1,11 +1,15 @@
-"""Export of paths: JSON, CSV and OBJ polylines."""
+"""Paths as text: JSON, CSV and OBJ polylines (`format_path`), and the one OBJ
+polyline writer (`obj_polylines`) that `jaxgeo.export.write_seams_obj` uses
+too. (Cutting patterns, DXF and SVG, are `jaxgeo.export`'s.)"""
 
 from __future__ import annotations
 
 import io
 import json
+from collections.abc import Sequence
 
 import numpy as np
+from jaxtyping import Float
 
 from .path import Path, Status
 
@@ -63,8 +67,24 @@ def format_path(path: Path, fmt: str) -> str:
             buf.write(f"{p[0]:.17g},{p[1]:.17g},{p[2]:.17g},{k},{e},{u:.17g}\n")
         return buf.getvalue()
     if fmt == "obj":
-        lines = [f"# jaxgeo path, length {d['length']:.17g}, status {d['status']}"]
-        lines += [f"v {p[0]:.17g} {p[1]:.17g} {p[2]:.17g}" for p in d["points"]]
-        lines.append("l " + " ".join(str(i + 1) for i in range(d["count"])))
-        return "\n".join(lines) + "\n"
+        comment = f"jaxgeo path, length {d['length']:.17g}, status {d['status']}"
+        return obj_polylines([np.asarray(d["points"])], comment=comment)
     raise ValueError(f"unknown format {fmt!r}; expected one of {FORMATS}")
+
+
+def obj_polylines(
+    polylines: Sequence[Float[np.ndarray, "_ 3"]],
+    names: Sequence[str] | None = None,
+    comment: str | None = None,
+) -> str:
+    """3-D polylines as OBJ text: per polyline an optional `o NAME`, its `v`
+    records and one `l` element (17 significant digits: coordinates round-trip)."""
+    lines = [] if comment is None else [f"# {comment}"]
+    base = 1
+    for k, pl in enumerate(polylines):
+        if names is not None:
+            lines.append(f"o {names[k]}")
+        lines += [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(pl)]
+        lines.append("l " + " ".join(str(base + i) for i in range(len(pl))))
+        base += len(pl)
+    return "\n".join(lines) + "\n"

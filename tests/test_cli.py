@@ -300,3 +300,20 @@ def test_cli_limits_blas_threads_unless_the_user_set_them(user):
         # numpy's and scipy's OpenBLAS are loaded by `import jaxgeo`: both now
         # run one thread (the machine's cores otherwise, 2 here)
         assert (value, int(most)) == ("1", 1) and int(n) >= 1
+
+
+def test_obj_polylines_round_trip(tmp_path):
+    """The one OBJ polyline writer (`format_path`'s "obj" and the pattern
+    command's seams.obj): each polyline's coordinates read back bitwise (17
+    significant digits) and its `l` element indexes its own vertices."""
+    from jaxgeo.export import write_seams_obj
+
+    rng = np.random.default_rng(0)
+    lines = [rng.standard_normal((n, 3)) for n in (2, 5, 3)]
+    write_seams_obj(lines, tmp_path / "s.obj")
+    rows = (tmp_path / "s.obj").read_text().splitlines()
+    v = np.array([[float(x) for x in r.split()[1:]] for r in rows if r[:2] == "v "])
+    assert np.array_equal(v, np.concatenate(lines))
+    elements = [[int(i) for i in r.split()[1:]] for r in rows if r[:2] == "l "]
+    assert elements == [[1, 2], [3, 4, 5, 6, 7], [8, 9, 10]]
+    assert [r for r in rows if r[:2] == "o "] == ["o seam_0", "o seam_1", "o seam_2"]
