@@ -2,7 +2,7 @@
 width-only optimisation (`jaxgeo.seams.fit_roll`) and the stress optimisation
 (`optimise_seams`), on the twin-peak tent and the four-point sail.
 
-    python -m jaxgeo.cutting.compare --steps 6 --rounds 2
+    python -m jaxgeo.cutting.compare --steps 6 --rounds 2 [--roundings 7]
 
 (it runs with one BLAS thread unless `OPENBLAS_NUM_THREADS` or
 `OMP_NUM_THREADS` is set: on a shared 2-core CPU the batched LAPACK calls of
@@ -38,6 +38,8 @@ from .seam_width import fit_roll
 
 MATERIAL = Material(600.0, 400.0, 0.3, 30.0)
 PRESTRESS = Prestress(2.0, 1.5)
+#: relative size of `measure`'s perturbations of a cut (about one ulp)
+ULP_JITTER = 2e-16
 
 
 @dataclasses.dataclass
@@ -65,16 +67,24 @@ def cases() -> list[Case]:
     ]
 
 
-def measure(mesh, layout, compensation: Compensation, method: Method) -> dict:
+def measure(
+    mesh, layout, compensation: Compensation, method: Method, roundings: int = 0
+) -> dict:
     """Stress deviation (max, RMS; kN/m), widest cloth of `layout`'s pattern,
     how many of its cloths' flattenings did not converge (`Cloth.converged`:
     such a cloth is measured on its trust-region fit) and how many flat
-    triangles are inverted (`Cloth.inverted`: folds, in how many cloths)."""
+    triangles are inverted (`Cloth.inverted`: folds, in how many cloths).
+
+    `roundings` > 0 measures the RMS again on that many copies of the cut whose
+    vertices are multiplied by 1 + 2e-16·N(0, 1) (seeded; about one ulp): where
+    cloths fold, their least-strain minimum is not unique and moves with the
+    last bits of the cut (docs/cutting.md), and `rms_range` (min, max over the
+    cut and its copies) says by how much."""
     cut, _ = cut_layout(mesh, layout, TraceOptions("local", 160), method)
     pat = make_pattern(cut)
     cloths = compensate_pattern(pat, compensation)
     total = reassemble(cloths, MATERIAL, PRESTRESS).total_stats()
-    return {
+    out = {
         "max": total["max"],
         "rms": total["rms"],
         "widest": float(pat.widths.max()),
@@ -82,6 +92,17 @@ def measure(mesh, layout, compensation: Compensation, method: Method) -> dict:
         "inverted": sum(c.inverted for c in pat.cloths),
         "folded": sum(c.inverted > 0 for c in pat.cloths),
     }
+    if roundings:
+        rng = np.random.default_rng(0)
+        rms = [total["rms"]]
+        for _ in range(roundings):
+            noise = 1 + ULP_JITTER * rng.standard_normal(cut.vertices.shape)
+            moved = dataclasses.replace(cut, vertices=cut.vertices * noise)
+            again = make_pattern(moved)
+            cl = compensate_pattern(again, compensation)
+            rms.append(reassemble(cl, MATERIAL, PRESTRESS).total_stats()["rms"])
+        out["rms_range"] = [float(min(rms)), float(max(rms))]
+    return out
 
 
 def run(
@@ -91,6 +112,7 @@ def run(
     only: str | None = None,
     max_move: float = 0.02,
     solver: str = "banded",
+    roundings: int = 0,
 ) -> list[dict]:
     eps = np.asarray(PRESTRESS.strain(MATERIAL))[:2]
     comp = Compensation(*(100 * eps))
@@ -108,13 +130,13 @@ def run(
         method = settings.method
         log(f"{c.name}: {c.mesh.n_faces} faces, {c.layout.n_seams} seams")
         t = time.time()
-        uniform = measure(c.mesh, c.layout, comp, method)
+        uniform = measure(c.mesh, c.layout, comp, method, roundings)
         log(f"  uniform {uniform} ({time.time() - t:.0f} s)")
         t = time.time()
         _, lw, _, _ = fit_roll(
             c.mesh, c.layout, c.roll_width, rounds=rounds, steps=steps, method=method
         )
-        width = measure(c.mesh, lw, comp, method)
+        width = measure(c.mesh, lw, comp, method, roundings)
         log(f"  width-only {width} ({time.time() - t:.0f} s)")
         t = time.time()
         res = optimise_seams(
@@ -126,7 +148,7 @@ def run(
             max_move=max_move,
             log=log,
         )
-        stress = measure(c.mesh, res.layout, comp, method)
+        stress = measure(c.mesh, res.layout, comp, method, roundings)
         log(f"  stress {stress} ({time.time() - t:.0f} s)")
         rows.append(
             {"case": c.name, "uniform": uniform, "width": width, "stress": stress}
@@ -141,6 +163,10 @@ def table(rows: list[dict]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     names = {"uniform": "uniform", "width": "width-only", "stress": "stress-optimised"}
+    ranged = any("rms_range" in r[k] for r in rows for k in names)
+    if ranged:
+        out[0] += " RMS over roundings (min–max) |"
+        out[1] += "---|"
     for r in rows:
         base = r["uniform"]["rms"]
         for key, label in names.items():
@@ -150,6 +176,9 @@ def table(rows: list[dict]) -> str:
                 f"{100 * (m['rms'] / base - 1):+.1f} % | {m['widest']:.3f} | "
                 f"{m['unconverged']} | {m['inverted']} ({m['folded']}) |"
             )
+            if ranged:
+                lo, hi = m.get("rms_range", (m["rms"], m["rms"]))
+                out[-1] += f" {lo:.4g}–{hi:.4g} |"
     return "\n".join(out)
 
 
@@ -171,13 +200,20 @@ def main(argv: list[str] | None = None) -> int:
         choices=["banded", "sparse", "qr", "lsmr"],
         help="the flattening's solver in the stress objective (Settings.solver)",
     )
+    p.add_argument(
+        "--roundings",
+        type=int,
+        default=0,
+        help="also measure each layout's RMS on this many copies of its cut moved "
+        "by about one ulp (seeded), and report the range",
+    )
     a = p.parse_args(argv)
     t0 = time.time()
 
     def log(msg: str) -> None:
         print(f"[{time.time() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
 
-    rows = run(a.steps, a.rounds, log, a.only, a.max_move, a.solver)
+    rows = run(a.steps, a.rounds, log, a.only, a.max_move, a.solver, a.roundings)
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=2)
