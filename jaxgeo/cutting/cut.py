@@ -17,6 +17,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 from jaxtyping import Float, Int
@@ -26,7 +28,7 @@ from .._errors import JaxgeoError
 from ..locate import SurfacePoint
 from ..mesh import Mesh
 from ..methods import Method
-from ..path import EDGE, FACE, VERTEX, Path, Status
+from ..path import EDGE, VERTEX, Path, Status
 from ..trace import TraceOptions
 from .layout import Layout, trace_seams
 
@@ -113,45 +115,49 @@ class CutMesh:
 
 
 def _locations(
-    mesh_np, path: Path, ends: tuple[SurfacePoint, SurfacePoint]
+    mesh: Mesh, path: Path, ends: tuple[SurfacePoint, SurfacePoint]
 ) -> list[tuple]:
-    """A seam as a list of (location, path index): ('v', vertex) or
-    ('e', edge, u) locations; the endpoints `ends` are
-    snapped onto the nearest side of their face (seam ends lie on the boundary,
-    possibly inset by a hair for the laser ray)."""
-    faces, edges, face_edges = mesh_np
+    """A seam as a list of (location, path index), the cutter's hashable keys:
+    `("v", vertex)` or `("e", edge, u)`, one per run of equal locations. Each
+    node is read as the element it lies on (`_node_elements`); an edge
+    parameter within `SNAP` of an end is that vertex."""
     n = int(path.count)
-    kinds = np.asarray(path.kinds)[:n]
-    elems = np.asarray(path.elements)[:n]
-    params = np.asarray(path.params)[:n]
+    edges = np.asarray(mesh.edges)
+    kinds, index, t = (np.asarray(x)[:n] for x in _node_elements(mesh, path, *ends))
     out: list[tuple] = []
-    for j in range(n):
-        k, el = int(kinds[j]), int(elems[j])
+    for j, (k, i, u) in enumerate(zip(kinds.tolist(), index.tolist(), t.tolist())):
         if k == VERTEX:
-            loc = ("v", el)
+            loc = ("v", i)
+        elif k == EDGE and u < SNAP:
+            loc = ("v", int(edges[i, 0]))
+        elif k == EDGE and u > 1 - SNAP:
+            loc = ("v", int(edges[i, 1]))
         elif k == EDGE:
-            loc = ("e", el, float(params[j]))
-        elif k == FACE:
-            end = ends[0 if j == 0 else 1]
-            el = int(np.asarray(end.face))
-            bary = np.asarray(end.bary, float)
-            c = int(np.argmin(bary))
-            e = int(face_edges[el, c])
-            a = faces[el, (c + 1) % 3]
-            w = bary[(c + 2) % 3] / max(bary[(c + 1) % 3] + bary[(c + 2) % 3], 1e-300)
-            # point = (1-w)·a + w·b, as a parameter from edges[e, 0]
-            loc = ("e", e, float(w if edges[e, 0] == a else 1.0 - w))
+            loc = ("e", i, u)
         else:
-            raise JaxgeoError(f"unknown path point kind {k}")
-        if loc[0] == "e":
-            e, u = loc[1], loc[2]
-            if u < SNAP:
-                loc = ("v", int(edges[e, 0]))
-            elif u > 1 - SNAP:
-                loc = ("v", int(edges[e, 1]))
+            raise JaxgeoError(f"seam point {j} lies on no edge nor vertex")
         if not out or out[-1][0] != loc:
             out.append((loc, j))
     return out
+
+
+@eqx.filter_jit
+def _node_elements(mesh: Mesh, path: Path, start: SurfacePoint, end: SurfacePoint):
+    """`(kind, index, t)` of each node of `path` (`Path.surface_points`, read by
+    `SurfacePoint.element`), its endpoints `start` and `end` snapped onto the
+    nearest side of their face first: seam ends lie on the boundary, possibly
+    inset by a hair for the laser ray."""
+    ends = tuple(_on_nearest_side(p) for p in (start, end))
+    path = eqx.tree_at(
+        lambda p: (p.start, p.end), path, ends, is_leaf=lambda x: x is None
+    )
+    return path.surface_points(mesh).element(mesh)
+
+
+def _on_nearest_side(p: SurfacePoint) -> SurfacePoint:
+    bary = jnp.asarray(p.bary)
+    side = jnp.arange(3) == jnp.argmin(bary, axis=-1)[..., None]
+    return SurfacePoint(jnp.asarray(p.face, jnp.int32), jnp.where(side, 0, bary))
 
 
 #: A seam as `cut_mesh` used to take it: `(path, bary_start, bary_end)`.
@@ -180,7 +186,6 @@ def cut_mesh(mesh: Mesh, seams: Path | Sequence[Path | LegacySeam]) -> CutMesh:
     edges = np.asarray(mesh.edges)
     edge_faces = np.asarray(mesh.edge_faces)
     face_edges = np.asarray(mesh.face_edges)
-    mesh_np = (faces, edges, face_edges)
     pts = [p for p in V]
     origin: list[tuple] = [("v", i) for i in range(len(V))]
     edge_points: dict[int, list[tuple[float, int]]] = {}
@@ -206,7 +211,7 @@ def cut_mesh(mesh: Mesh, seams: Path | Sequence[Path | LegacySeam]) -> CutMesh:
         return {loc[1]} if loc[0] == "v" else set(edges[loc[1]].tolist())
 
     for sid, seam in enumerate(rows):
-        located = _locations(mesh_np, *_path_and_ends(seam))
+        located = _locations(mesh, *_path_and_ends(seam))
         locs = [loc for loc, _ in located]
         ids = [vid(loc, sid, j) for loc, j in located]
         seam_points.append(np.asarray(ids))
