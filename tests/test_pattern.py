@@ -296,7 +296,7 @@ def test_the_sail_check_does_not_move_with_one_ulp_changes_of_the_cut():
     same RMS to the flattening's convergence (each to GN_RTOL = 1e-10 of the
     cloth's size, ~3.5e-7 of the RMS as in test_cutting_objective; measured
     3e-13), where a jump between folded minima moves the twin-peak tent's RMS
-    by 16-64 % (docs/cutting.md)."""
+    by up to a factor 4.6 (docs/cutting.md)."""
     from jaxgeo.cutting import compare
 
     sail = compare.cases()[1]

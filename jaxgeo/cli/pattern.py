@@ -286,8 +286,9 @@ def run_pattern(args: argparse.Namespace) -> int:
         f"(roll {args.roll_width} m); stress deviation RMS {total['rms']:.3g} kN/m, "
         f"max {total['max']:.3g} kN/m; written to {out}"
     )
-    folded = [(p.name, c.cloth.inverted) for p, c in zip(pieces, cloths)]
-    folded = [(name, n) for name, n in folded if n]
+    folded = [
+        (p.name, c.cloth.inverted) for p, c in zip(pieces, cloths) if c.cloth.inverted
+    ]
     if folded:
         print(
             "jaxgeo pattern: warning: the flattening of "

@@ -81,9 +81,13 @@ def measure(
     last bits of the cut (docs/cutting.md), and `rms_range` (min, max over the
     cut and its copies) says by how much."""
     cut, _ = cut_layout(mesh, layout, TraceOptions("local", 160), method)
-    pat = make_pattern(cut)
-    cloths = compensate_pattern(pat, compensation)
-    total = reassemble(cloths, MATERIAL, PRESTRESS).total_stats()
+
+    def check(cut):
+        pat = make_pattern(cut)
+        cloths = compensate_pattern(pat, compensation)
+        return pat, reassemble(cloths, MATERIAL, PRESTRESS).total_stats()
+
+    pat, total = check(cut)
     out = {
         "max": total["max"],
         "rms": total["rms"],
@@ -98,9 +102,7 @@ def measure(
         for _ in range(roundings):
             noise = 1 + ULP_JITTER * rng.standard_normal(cut.vertices.shape)
             moved = dataclasses.replace(cut, vertices=cut.vertices * noise)
-            again = make_pattern(moved)
-            cl = compensate_pattern(again, compensation)
-            rms.append(reassemble(cl, MATERIAL, PRESTRESS).total_stats()["rms"])
+            rms.append(check(moved)[1]["rms"])
         out["rms_range"] = [float(min(rms)), float(max(rms))]
     return out
 
