@@ -101,12 +101,20 @@ def _snap_tol(dtype) -> float:
 
 
 class _End(eqx.Module):
-    """An endpoint: its face, snapped barycentrics, and the element it lies on."""
+    """An endpoint: the `SurfacePoint` snapped onto the element it lies on, and
+    that element as `SurfacePoint.element` reads it (the edge parameter unused)."""
 
-    face: Int[Array, ""]
-    bary: Float[Array, " 3"]
+    point: SurfacePoint
     kind: Int[Array, ""]  # FACE, EDGE or VERTEX
     index: Int[Array, ""]
+
+    @property
+    def face(self) -> Int[Array, ""]:
+        return jnp.asarray(self.point.face)
+
+    @property
+    def bary(self) -> Float[Array, " 3"]:
+        return jnp.asarray(self.point.bary)
 
 
 def _end(mesh: Mesh, sp: SurfacePoint) -> _End:
@@ -115,7 +123,7 @@ def _end(mesh: Mesh, sp: SurfacePoint) -> _End:
     tol = _snap_tol(b.dtype)
     kind, index = snap(mesh, SurfacePoint(face, b), tol)
     b = jnp.where(b <= tol, 0.0, b)
-    return _End(face, b / jnp.sum(b), kind, index)
+    return _End(SurfacePoint(face, b / jnp.sum(b)), kind, index)
 
 
 def _contains(mesh: Mesh, end: _End, faces):
