@@ -3,7 +3,7 @@ these names, kept so that `from jaxgeo import seams` and `jaxgeo.seams.X` keep
 working. The code lives in the cutting sub-package (issue 16, one job per module):
 
 - `jaxgeo.cutting.layout`: `Layout`, `radial_layout`, `peaks_layout`,
-  `parallel_layout`, `trace_seams`, `unbatch`, `INSET`;
+  `bridged_layout`, `parallel_layout`, `trace_seams`, `unbatch`, `INSET`;
 - `jaxgeo.cutting.cut`: `cut` (trace a layout's seams and cut the mesh);
 - `jaxgeo.cutting.seam_width`: the width/length objective (`Weights`,
   `cloth_widths`, `objective`), its BFGS (`optimise`, `Result`) and `fit_roll`.
@@ -16,6 +16,7 @@ from .cutting.cut import cut as cut
 from .cutting.layout import (
     INSET as INSET,
     Layout as Layout,
+    bridged_layout as bridged_layout,
     parallel_layout as parallel_layout,
     peaks_layout as peaks_layout,
     radial_layout as radial_layout,
@@ -42,6 +43,7 @@ __all__ = [
     "fit_roll",
     "objective",
     "optimise",
+    "bridged_layout",
     "parallel_layout",
     "peaks_layout",
     "radial_layout",

@@ -82,3 +82,52 @@ def test_old_module_imports_first_in_a_fresh_interpreter():
     code = f"import {module} as m; print(sorted(m.__all__)[0])"
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-2000:]
+
+
+def test_bridged_layout_leaves_every_seam_from_a_ring():
+    mesh = jg.Mesh(*surfaces.twin_peak_tent(n_side=4, n_radial=4))
+    n, b, sector, shift = 5, 3, 130.0, 1.0
+    layout = seams.bridged_layout(mesh, n, b, sector, shift)
+    assert layout.n_seams == 2 * n + b
+    assert (layout.loop_a == np.repeat([1, 2, 1], [n, n, b])).all()
+    assert (layout.loop_b == np.repeat([0, 0, 2], [n, n, b])).all()
+    ends = layout.end_points(mesh)  # (N, 2, 3)
+    # the ring ends at the stated plan angles round each ring's centre,
+    # measured from the direction away from the other ring (+x for the right
+    # ring, loop 1 here); the angles are of points on the ring polyline, so
+    # they hold to the rounding of loop_parameter's projection (1e-9)
+    centres = {1: np.array([1.0, 0.0]), 2: np.array([-1.0, 0.0])}
+    mirror = {1: 1.0, 2: -1.0}
+
+    def angle(p, ring):
+        d = p[:2] - centres[ring]
+        return np.degrees(np.arctan2(d[1], mirror[ring] * d[0]))
+
+    out = np.linspace(-sector, sector, n) + shift
+    bridges = sector + (360 - 2 * sector) * np.arange(1, b + 1) / (b + 1) + shift
+    for ring, rows in ((1, slice(0, n)), (2, slice(n, 2 * n))):
+        got = [angle(p, ring) for p in ends[rows, 0]]
+        assert np.allclose(got, out, atol=1e-6)
+    wrap = (bridges + 180) % 360 - 180
+    assert np.allclose([angle(p, 1) for p in ends[2 * n :, 0]], wrap, atol=1e-6)
+    assert np.allclose([angle(p, 2) for p in ends[2 * n :, 1]], wrap, atol=1e-6)
+    # the outer ends lie where the plan rays meet the outer loop: on the
+    # rectangle's sides x = ±2 or y = ±1 (the tent's plan), in the ray's direction
+    for ring, rows in ((1, slice(0, n)), (2, slice(n, 2 * n))):
+        for p_ring, p_out in ends[rows]:
+            a, c = p_ring[:2] - centres[ring], p_out[:2] - centres[ring]
+            assert abs(a[0] * c[1] - a[1] * c[0]) < 1e-9 * np.linalg.norm(c)
+            assert a @ c > 0
+            assert np.isclose(abs(p_out[0]), 2) or np.isclose(abs(p_out[1]), 1)
+    with pytest.raises(jg.JaxgeoError, match="three boundary loops"):
+        seams.bridged_layout(jg.Mesh(*surfaces.cone_tent(12, 3)), 5, 3)
+    with pytest.raises(jg.JaxgeoError, match="sector"):
+        seams.bridged_layout(mesh, 5, 3, sector=190.0)
+    with pytest.raises(jg.JaxgeoError, match="at least one seam"):
+        seams.bridged_layout(mesh, 5, [])
+    # angles given instead of counts
+    given = seams.bridged_layout(mesh, [-40.0, 0.0, 40.0], [170.0, 190.0], shift=2.0)
+    assert given.n_seams == 8
+    ends = given.end_points(mesh)
+    assert np.allclose([angle(p, 2) for p in ends[3:6, 0]], [-38, 2, 42], atol=1e-6)
+    assert np.allclose([angle(p, 1) for p in ends[6:, 0]], [172, -168], atol=1e-6)

@@ -4,9 +4,9 @@ A layout is `N` geodesic seams, seam `i` from loop `loop_a[i]` at normalised arc
 length `s_a[i]` to loop `loop_b[i]` at `s_b[i]` (see `jaxgeo.boundary`); the
 parameters `x = (s_a, s_b)` are what `jaxgeo.cutting.seam_width.optimise` and
 `jaxgeo.cutting.optimise_seams` move. The constructors place seams for the
-tents of the paper (`radial_layout`, `peaks_layout`) and for a four-point sail
-(`parallel_layout`); `trace_seams` traces them all in one vmapped, jitted
-`shortest_path`.
+tents of the paper (`radial_layout`; `peaks_layout` and `bridged_layout` for
+twin peaks) and for a four-point sail (`parallel_layout`); `trace_seams`
+traces them all in one vmapped, jitted `shortest_path`.
 
 (Moved here from `jaxgeo.seams`, which still re-exports the public names.)
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -40,6 +41,7 @@ __all__ = [
     "INSET",
     "TRACE_OPTIONS",
     "Layout",
+    "bridged_layout",
     "parallel_layout",
     "peaks_layout",
     "radial_layout",
@@ -229,6 +231,90 @@ def peaks_layout(
         sb += matched.tolist()
         la += [ring] * n_per_ring
         lb += [0] * n_per_ring
+    return _layout(loops, la, lb, sa, sb)
+
+
+def _angles(n_or_angles, uniform) -> np.ndarray:
+    """`uniform(n)` for a count `n`, else the given angles (degrees)."""
+    if np.ndim(n_or_angles) == 0:
+        if int(n_or_angles) < 1:
+            raise JaxgeoError("bridged_layout needs at least one seam of each kind")
+        return np.asarray(uniform(int(n_or_angles)), float)
+    a = np.asarray(n_or_angles, float)
+    if a.size == 0:
+        raise JaxgeoError("bridged_layout needs at least one seam of each kind")
+    return a
+
+
+def bridged_layout(
+    mesh: Mesh,
+    n_per_ring: int | Sequence[float],
+    n_bridges: int | Sequence[float],
+    sector: float = 130.0,
+    shift: float = 1.0,
+) -> Layout:
+    """Seams of a tent with two peak rings side by side along x (the twin-peak
+    tent), without seams across the valley: every seam leaves a ring. Plan
+    view, z up; angles in degrees round each ring's centre, measured from the
+    direction away from the other ring (mirrored between the two rings):
+
+    - from each ring, `n_per_ring` seams at angles uniform in [−sector,
+      sector] + `shift`, each to the outer loop (loop 0) where the plan ray
+      from the ring's centre at that angle meets it;
+    - `n_bridges` seams from ring to ring across the valley (loop 1 to loop
+      2), at angles uniform in the gap (sector, 360° − sector) + `shift`.
+
+    A sequence instead of a count gives the angles themselves (degrees, before
+    `shift`); `sector` then plays no part in them.
+
+    So every cloth touches a peak ring and none wraps round one, as the
+    valley-side cloths of `peaks_layout` do (they fold when flattened,
+    docs/cutting.md). The `shift` keeps seams off the mesh's lines y = 0 and
+    x = 0, along which a seam would change its sequence of mesh elements at
+    any move of its ends.
+    """
+    loops = boundary_loops(mesh)
+    if len(loops) != 3:
+        raise JaxgeoError(
+            f"bridged_layout needs three boundary loops (twin peaks), the mesh "
+            f"has {len(loops)}"
+        )
+    if not 0.0 < sector < 180.0:
+        raise JaxgeoError("bridged_layout needs 0 < sector < 180 degrees")
+    gap = 360.0 - 2.0 * sector
+    out = _angles(n_per_ring, lambda n: np.linspace(-sector, sector, n)) + shift
+    bridges = (
+        _angles(n_bridges, lambda n: sector + gap * np.arange(1, n + 1) / (n + 1))
+        + shift
+    )
+    op = loops[0].polyline(mesh)
+
+    def ring_ray(ring: int, deg: float):
+        rp = loops[ring].polyline(mesh)
+        centre = rp[:-1, :2].mean(axis=0)
+        th = math.radians(deg)
+        th = th if centre[0] > 0 else math.pi - th  # mirrored on the left ring
+        d = np.array([math.cos(th), math.sin(th)])
+        hit = _ray_hit(rp, centre, d)
+        assert hit is not None  # a ray from the ring's centre meets the ring
+        return loop_parameter(mesh, loops[ring], hit), centre, d
+
+    la, lb, sa, sb = [], [], [], []
+    for ring in (1, 2):
+        for deg in out:
+            s_ring, centre, d = ring_ray(ring, deg)
+            hit = _ray_hit(op, centre, d)
+            if hit is None:
+                raise JaxgeoError("bridged_layout: a ray from a ring misses loop 0")
+            la.append(ring)
+            lb.append(0)
+            sa.append(s_ring)
+            sb.append(loop_parameter(mesh, loops[0], hit))
+    for deg in bridges:
+        la.append(1)
+        lb.append(2)
+        sa.append(ring_ray(1, deg)[0])
+        sb.append(ring_ray(2, deg)[0])
     return _layout(loops, la, lb, sa, sb)
 
 
