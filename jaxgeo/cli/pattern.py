@@ -292,7 +292,10 @@ def run_pattern(args: argparse.Namespace) -> int:
     if folded:
         print(
             "jaxgeo pattern: warning: the flattening of "
-            + ", ".join(f"cloth {name} ({n} triangles)" for name, n in folded)
+            + ", ".join(
+                f"cloth {name} ({n} triangle{'s' if n > 1 else ''})"
+                for name, n in folded
+            )
             + " folds over itself (inverted triangles): too curved to lie flat "
             "without folds; more seams through it would split it",
             file=sys.stderr,
