@@ -271,7 +271,9 @@ def bridged_layout(
     valley-side cloths of `peaks_layout` do (they fold when flattened,
     docs/cutting.md). The `shift` keeps seams off the mesh's lines y = 0 and
     x = 0, along which a seam would change its sequence of mesh elements at
-    any move of its ends.
+    any move of its ends. (On the built-in tent its cloths still fold next to
+    the rings, and the reassembly figures change much with 1° of the angles:
+    docs/cutting.md, "Session 17".)
     """
     loops = boundary_loops(mesh)
     if len(loops) != 3:
