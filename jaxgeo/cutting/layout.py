@@ -237,9 +237,7 @@ def peaks_layout(
 def _angles(n_or_angles, uniform) -> np.ndarray:
     """`uniform(n)` for a count `n`, else the given angles (degrees)."""
     if np.ndim(n_or_angles) == 0:
-        if int(n_or_angles) < 1:
-            raise JaxgeoError("bridged_layout needs at least one seam of each kind")
-        return np.asarray(uniform(int(n_or_angles)), float)
+        n_or_angles = uniform(max(int(n_or_angles), 0))
     a = np.asarray(n_or_angles, float)
     if a.size == 0:
         raise JaxgeoError("bridged_layout needs at least one seam of each kind")
@@ -289,34 +287,38 @@ def bridged_layout(
         _angles(n_bridges, lambda n: sector + gap * np.arange(1, n + 1) / (n + 1))
         + shift
     )
-    op = loops[0].polyline(mesh)
-
-    def ring_ray(ring: int, deg: float):
+    rings = {}
+    for ring in (1, 2):
         rp = loops[ring].polyline(mesh)
-        centre = rp[:-1, :2].mean(axis=0)
+        rings[ring] = (rp, rp[:-1, :2].mean(axis=0))
+
+    def plan(ring: int, deg: float) -> float:
+        """The plan angle (radians) of `deg` from the direction away from the
+        other ring: mirrored on the left ring."""
         th = math.radians(deg)
-        th = th if centre[0] > 0 else math.pi - th  # mirrored on the left ring
-        d = np.array([math.cos(th), math.sin(th)])
-        hit = _ray_hit(rp, centre, d)
-        assert hit is not None  # a ray from the ring's centre meets the ring
-        return loop_parameter(mesh, loops[ring], hit), centre, d
+        return th if rings[ring][1][0] > 0 else math.pi - th
 
     la, lb, sa, sb = [], [], [], []
     for ring in (1, 2):
-        for deg in out:
-            s_ring, centre, d = ring_ray(ring, deg)
-            hit = _ray_hit(op, centre, d)
-            if hit is None:
-                raise JaxgeoError("bridged_layout: a ray from a ring misses loop 0")
-            la.append(ring)
-            lb.append(0)
-            sa.append(s_ring)
-            sb.append(loop_parameter(mesh, loops[0], hit))
-    for deg in bridges:
-        la.append(1)
-        lb.append(2)
-        sa.append(ring_ray(1, deg)[0])
-        sb.append(ring_ray(2, deg)[0])
+        a, b = _ring_seams(mesh, loops, ring, [plan(ring, deg) for deg in out])
+        if len(a) != len(out):
+            raise JaxgeoError("bridged_layout: a ray from a ring misses loop 0")
+        la += [ring] * len(a)
+        lb += [0] * len(a)
+        sa += a
+        sb += b
+
+    def on_ring(ring: int, deg: float) -> float:
+        rp, centre = rings[ring]
+        th = plan(ring, deg)
+        hit = _ray_hit(rp, centre, np.array([math.cos(th), math.sin(th)]))
+        assert hit is not None  # a ray from the ring's centre meets the ring
+        return loop_parameter(mesh, loops[ring], hit)
+
+    la += [1] * len(bridges)
+    lb += [2] * len(bridges)
+    sa += [on_ring(1, deg) for deg in bridges]
+    sb += [on_ring(2, deg) for deg in bridges]
     return _layout(loops, la, lb, sa, sb)
 
 
