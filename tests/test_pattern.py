@@ -59,7 +59,13 @@ def test_each_cloth_is_flattened_to_a_minimum_of_its_strain(cone_pattern):
     the move is the first solve's remaining error, quadratic in its last
     Newton step, or at most its last Gauss-Newton step), and the gauge-fixed
     Hessian there is positive definite (a minimum, not a saddle)."""
-    from jaxgeo.cutting._least_strain import GN_ATOL, GN_RTOL, converge, system
+    from jaxgeo.cutting._least_strain import (
+        GN_ATOL,
+        GN_RTOL,
+        area_params,
+        converge,
+        system,
+    )
     from jaxgeo.cutting.flatten import SEAM_WEIGHT
 
     _, _, _, _, pat = cone_pattern
@@ -70,14 +76,16 @@ def test_each_cloth_is_flattened_to_a_minimum_of_its_strain(cone_pattern):
         ew = np.array(
             [SEAM_WEIGHT if frozenset(p) in seam else 1.0 for p in edges.tolist()]
         )
-        again, ok = converge(c.vertices3d, edges, ew, c.uv)
+        again, ok = converge(c.vertices3d, edges, ew, c.faces, c.uv)
         size = np.max(np.abs(c.uv))
         assert ok and np.max(np.abs(again - c.uv)) <= 2 * (GN_ATOL + GN_RTOL * size)
         L = np.linalg.norm(
             c.vertices3d[edges[:, 0]] - c.vertices3d[edges[:, 1]], axis=1
         )
         ones = np.ones(len(c.uv))
-        _, A, B, _ = system(c.uv, L, np.sqrt(ew) / L, edges, ones, c.uv, True)
+        area = (c.faces, *area_params(c.vertices3d, c.faces))
+        sw = np.sqrt(ew) / L
+        _, A, B, _ = system(c.uv, L, sw, edges, ones, c.uv, area, True)
         assert np.linalg.eigvalsh(A.toarray() + B.T @ B)[0] > 0.0
 
 

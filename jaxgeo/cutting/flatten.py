@@ -3,7 +3,9 @@
 1. **Flatten** (`flatten_cloth`): least-squares conformal map (LSCM, Lévy et al.
    2002) by sparse least squares, then the edge-length strain
    Σ w_e ((|x_i − x_j| − L_e)/L_e)² minimised (seam edges weighted 10×, so the
-   two flattened copies of a seam keep its 3-D length and sew together): 30
+   two flattened copies of a seam keep its 3-D length and sew together), with
+   a one-sided area term that keeps every face above 0.9 of its 3-D area
+   (`_least_strain.AREA_FLOOR`: no crushed or mirrored slivers): 30
    trust-region evaluations of `scipy.optimize.least_squares`, then converged
    to a minimum by `_least_strain.converge` (Newton steps, off saddles), the
    flattening the stress objective (`cutting.objective`) starts from.
@@ -27,7 +29,7 @@ import scipy.sparse as sp
 from jaxtyping import Bool, Float, Int
 from scipy.spatial import ConvexHull
 
-from ._least_strain import converge
+from ._least_strain import area_params, area_residuals, converge
 from .cut import CutMesh, edge_table
 
 __all__ = [
@@ -132,20 +134,33 @@ def _flatten(V, F, seam_mask):
         ew[seam_mask] = SEAM_WEIGHT
     w = np.sqrt(ew) / L
     i, j = edges[:, 0], edges[:, 1]
-    n = len(V)
+    n, ne = len(V), len(edges)
+    a3, sa = area_params(V, F)
+    # Jacobian pattern: an edge's row has its ends' four dofs, a face's its
+    # corners' six
+    rows = np.concatenate(
+        [np.repeat(np.arange(ne), 4), ne + np.repeat(np.arange(len(F)), 6)]
+    )
+    cols = np.concatenate(
+        [
+            np.stack([2 * i, 2 * i + 1, 2 * j, 2 * j + 1], 1).ravel(),
+            (2 * F[:, :, None] + np.arange(2)).ravel(),
+        ]
+    )
 
     def res(x):
         p = x.reshape(n, 2)
-        return w * (np.linalg.norm(p[i] - p[j], axis=1) - L)
+        r_f, _ = area_residuals(p, F, a3, sa)
+        return np.concatenate([w * (np.linalg.norm(p[i] - p[j], axis=1) - L), r_f])
 
     def jac(x):
         p = x.reshape(n, 2)
         d = p[i] - p[j]
         u = d / np.linalg.norm(d, axis=1)[:, None] * w[:, None]
-        r = np.repeat(np.arange(len(edges)), 4)
-        c = np.stack([2 * i, 2 * i + 1, 2 * j, 2 * j + 1], 1).ravel()
         v = np.stack([u[:, 0], u[:, 1], -u[:, 0], -u[:, 1]], 1).ravel()
-        return sp.csr_matrix((v, (r, c)), shape=(len(edges), 2 * n))
+        _, jf = area_residuals(p, F, a3, sa)
+        vals = np.concatenate([v, jf.ravel()])
+        return sp.csr_matrix((vals, (rows, cols)), shape=(ne + len(F), 2 * n))
 
     sol = scipy.optimize.least_squares(
         res,
@@ -159,7 +174,7 @@ def _flatten(V, F, seam_mask):
         max_nfev=30,
         tr_solver="lsmr",
     )
-    uv, converged = converge(V, edges, ew, sol.x.reshape(n, 2))
+    uv, converged = converge(V, edges, ew, F, sol.x.reshape(n, 2))
     return uv, edges, bool(converged)
 
 

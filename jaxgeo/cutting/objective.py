@@ -5,7 +5,8 @@
 (`jax.vmap` of `jaxgeo.shortest_path`, differentiable points) → cut vertices (a
 fixed weighted sum of mesh vertices and seam points, `CutMesh.sources`: the cut
 topology is held at a **template** built at some layout) → each cloth flattened
-by least edge-length strain (Gauss-Newton then Newton steps in JAX, each a
+by least edge-length strain with the one-sided area term of
+`_least_strain` (Gauss-Newton then Newton steps in JAX, each a
 block-tridiagonal Cholesky of the system in reverse Cuthill-McKee order,
 `_jax_newton`; fixed shapes, so it runs under jit, vmap and grad on CPU and
 GPU; started from the template's converged flattening; differentiated
@@ -49,7 +50,16 @@ from ..mesh import Mesh
 from ..methods import Method
 from ..path import Status
 from . import _least_strain as strain
-from ._least_strain import GN_ATOL, GN_RTOL, HOST_STEPS, NEWTON_NEAR, STALL_TOL
+from ._least_strain import (
+    _AREA_HESSIAN,
+    AREA_FLOOR,
+    AREA_WEIGHT,
+    GN_ATOL,
+    GN_RTOL,
+    HOST_STEPS,
+    NEWTON_NEAR,
+    STALL_TOL,
+)
 from .compensate import CutCloth
 from .material import Material, Prestress
 from .reassembly import biot_strain, deviation
@@ -247,18 +257,18 @@ def make_template(
         if 2 * band + 2 > cap.block:
             raise JaxgeoError("a cloth's bandwidth outgrew the template's block")
         xk, ek = x3[c.vertex_ids], ew[k, : len(e)]
-        uv_k, _ = strain.converge(xk, e, ek, c.uv)
+        uv_k, _ = strain.converge(xk, e, ek, f, c.uv)
         a, e_fresh, e_start, kept = (
             cc.warp_angle,
-            strain.edge_energy(xk, e, ek, uv_k),
+            strain.strain_energy(xk, e, ek, f, uv_k),
             np.nan,
             False,
         )
         if starts is not None and starts[k] is not None:
             from .compensate import principal_angle
 
-            uv_s, ok = strain.converge(xk, e, ek, np.asarray(starts[k], np.float64))
-            e_start = strain.edge_energy(xk, e, ek, uv_s)
+            uv_s, ok = strain.converge(xk, e, ek, f, np.asarray(starts[k], np.float64))
+            e_start = strain.strain_energy(xk, e, ek, f, uv_s)
             if ok:  # continue the start's branch
                 uv_k, a, kept = uv_s, principal_angle(uv_s, f), True
         if report is not None:
@@ -309,69 +319,100 @@ def _gauge(uv0, vmask):
     return nv, c0, r0, jnp.sqrt(jnp.sum(r0 * r0))
 
 
-def _residuals(u, L, sw, edges, vmask, uv0):
-    """Weighted edge-length residuals, pins of the padded vertices, and the
+def _area_params(x3, faces, fmask):
+    """`_least_strain.area_params` of a padded cloth: `(A3, sa)` per face, 0 on
+    padded faces."""
+    p = x3[faces]
+    a3 = 0.5 * _safe_norm(jnp.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])) * fmask
+    mean = jnp.sum(a3) / jnp.maximum(jnp.sum(fmask), 1.0)
+    live = fmask > 0
+    a3_safe, mean = jnp.where(live, a3, 1.0), jnp.where(mean > 0, mean, 1.0)
+    sa = jnp.where(live, jnp.sqrt(AREA_WEIGHT * a3_safe / mean) / a3_safe, 0.0)
+    return a3, sa
+
+
+def _area_residuals(u, faces, a3, sa):
+    """`_least_strain.area_residuals`' residuals (one-sided: zero on a face
+    above `AREA_FLOOR` of its 3-D area)."""
+    p = u[faces]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    a2 = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return sa * jnp.minimum(a2 - AREA_FLOOR * a3, 0.0)
+
+
+def _residuals(u, L, sw, edges, vmask, uv0, area):
+    """Weighted edge-length residuals, the area term's residuals (`area` =
+    `(faces, A3, sa)`, `_area_params`), pins of the padded vertices, and the
     gauge (centroid and mean rotation against the template's flat cloth, both
     zero at the optimum)."""
     i, j = edges[:, 0], edges[:, 1]
     nv, c0, r0, scale = _gauge(uv0, vmask)
     d = u[i] - u[j]
     r_e = sw * (_safe_norm(d) - L)
+    r_f = _area_residuals(u, *area)
     pins = (1.0 - vmask)[:, None] * u
     c = jnp.sum(u * vmask[:, None], 0) / nv - c0
     rotn = jnp.sum(r0[:, 0] * u[:, 1] - r0[:, 1] * u[:, 0]) / scale
-    return r_e, pins, c / scale, rotn / scale
+    return r_e, r_f, pins, c / scale, rotn / scale
 
 
-def _flatten(x3, edges, ew, vmask, uv0, solver="banded", band=None):
-    """Least edge-length strain flattening of one padded cloth, differentiated
-    implicitly in `x3` (through the optimality condition, not the iterations):
-    by `_implicit` for solvers "banded" and "sparse", by optimistix's adjoint
-    otherwise. `band`: `(pos, free, shape)` of the banded solve (`Template`)."""
+def _flatten(x3, edges, ew, faces, fmask, vmask, uv0, solver="banded", band=None):
+    """Least edge-length strain flattening (with the area term) of one padded
+    cloth, differentiated implicitly in `x3` (through the optimality
+    condition, not the iterations): by `_implicit` for solvers "banded" and
+    "sparse", by optimistix's adjoint otherwise. `band`: `(pos, free, shape)`
+    of the banded solve (`Template`)."""
     i, j = edges[:, 0], edges[:, 1]
     L = _safe_norm(x3[i] - x3[j])
     sw = jnp.sqrt(ew) / jnp.where(ew > 0, L, 1.0)
+    a3, sa = _area_params(x3, faces, fmask)
     uv0 = jax.lax.stop_gradient(uv0)
     if solver == "banded":
         if band is None:
             raise JaxgeoError("the banded flattening needs the template's band")
-        Ls, sws = jax.lax.stop_gradient((L, sw))
-        u, ok = _jax_newton(Ls, sws, edges, vmask, uv0, *band)
+        Ls, sws, a3s, sas = jax.lax.stop_gradient((L, sw, a3, sa))
+        area_s = (faces, a3s, sas)
+        u, ok = _jax_newton(Ls, sws, edges, vmask, uv0, area_s, *band)
         # the derivative solves with the Hessian at u by a banded Cholesky,
         # which has a factor only at a minimum: at a saddle (Newton converges
         # to any stationary point) the flattening is not valid
         pos, free, shape = band
         probe = _system_solve(
-            u, Ls, sws, edges, vmask, uv0, pos, free, shape, True, uv0
+            u, Ls, sws, edges, vmask, uv0, area_s, pos, free, shape, True, uv0
         )
         ok = ok & jnp.all(jnp.isfinite(probe))
-        return _implicit(solver, u, L, sw, edges, vmask, uv0, *band), ok
+        area = (faces, a3, sa)
+        return _implicit(solver, u, L, sw, area, edges, vmask, uv0, *band), ok
     if solver == "sparse":
         shapes = (
             jax.ShapeDtypeStruct(uv0.shape, uv0.dtype),
             jax.ShapeDtypeStruct((), jnp.bool_),
         )
+        Ls, sws, a3s, sas = jax.lax.stop_gradient((L, sw, a3, sa))
         u, ok = jax.pure_callback(
             strain.newton,
             shapes,
-            *jax.lax.stop_gradient((L, sw)),
+            Ls,
+            sws,
             edges,
             vmask,
             uv0,
+            (faces, a3s, sas),
             vmap_method="sequential",
         )
         z = jnp.zeros(0)
-        return _implicit(solver, u, L, sw, edges, vmask, uv0, z, z, z), ok
+        area = (faces, a3, sa)
+        return _implicit(solver, u, L, sw, area, edges, vmask, uv0, z, z, z), ok
 
     def residuals(u, args):
-        L, sw = args
-        return _residuals(u, L, sw, edges, vmask, uv0)
+        L, sw, a3, sa = args
+        return _residuals(u, L, sw, edges, vmask, uv0, (faces, a3, sa))
 
     sol = optx.least_squares(
         residuals,
         _gauss_newton(solver, uv0.shape[0]),
         uv0,
-        args=(L, sw),
+        args=(L, sw, a3, sa),
         max_steps=GN_STEPS,
         throw=False,
     )
@@ -394,8 +435,8 @@ def _flatten(x3, edges, ew, vmask, uv0, solver="banded", band=None):
 # removed), then y = x + N (B N)^-1 (z - B x).
 
 
-def _energy(u, L, sw, edges, vmask, uv0):
-    r = _residuals(u, L, sw, edges, vmask, uv0)
+def _energy(u, L, sw, edges, vmask, uv0, area):
+    r = _residuals(u, L, sw, edges, vmask, uv0, area)
     return 0.5 * sum(jnp.sum(x * x) for x in r)
 
 
@@ -423,9 +464,9 @@ def _gauge_rows(uv0, vmask):
     )
 
 
-def _band_matrix(u, L, sw, edges, vmask, pos, free, nblk, nb, full):
-    """The edge part of the system (Gauss-Newton, or with `full` the Hessian
-    of the edge terms), pins of padded vertices and identity rows at the held
+def _band_matrix(u, L, sw, edges, vmask, area, pos, free, nblk, nb, full):
+    """The edge and area part of the system (Gauss-Newton, or with `full` the
+    Hessian of those terms), pins of padded vertices and identity rows at the held
     coordinates, in block-tridiagonal form: diagonal blocks `(nblk, nb, nb)`
     and the blocks below them `(nblk - 1, nb, nb)`, in reordered dofs."""
     i, j = edges[:, 0], edges[:, 1]
@@ -447,6 +488,29 @@ def _band_matrix(u, L, sw, edges, vmask, pos, free, nblk, nb, full):
     cols = jnp.broadcast_to(2 * pos[b][:, :, None, None] + k2[None, :], shp)
     fr = free[a][:, :, :, None] * free[b][:, :, None, :]
     vals = sign[:, None, None] * blk[:, None] * fr
+    # the area term: per face J_f^T J_f (+ r_f d2 r_f with full) on the six
+    # dofs of its corners, which its edges already couple (the band holds it)
+    faces, a3, sa = area
+    r_f = _area_residuals(u, faces, a3, sa)
+    p = u[faces]
+    nxt, prv = p[:, jnp.array([1, 2, 0])], p[:, jnp.array([2, 0, 1])]
+    grad = 0.5 * jnp.stack([nxt[..., 1] - prv[..., 1], prv[..., 0] - nxt[..., 0]], -1)
+    on = jnp.where(r_f < 0, sa, 0.0)
+    jf = (grad * on[:, None, None]).reshape(-1, 6)
+    fblk = jf[:, :, None] * jf[:, None, :]
+    fblk = fblk + jnp.where(full, r_f * on, 0.0)[:, None, None] * _AREA_HESSIAN
+    fd = (2 * pos[faces][:, :, None] + k2).reshape(-1, 6)
+    ffree = free[faces].reshape(-1, 6)
+    fshape = fblk.shape
+    rows = jnp.concatenate(
+        [rows.ravel(), jnp.broadcast_to(fd[:, :, None], fshape).ravel()]
+    )
+    cols = jnp.concatenate(
+        [cols.ravel(), jnp.broadcast_to(fd[:, None, :], fshape).ravel()]
+    )
+    vals = jnp.concatenate(
+        [vals.ravel(), (fblk * ffree[:, :, None] * ffree[:, None, :]).ravel()]
+    )
     # diagonal: pins of padded vertices, 1 at held coordinates and beyond 2 Vc
     n = pos.shape[0]
     dof = (2 * pos[:, None] + k2).ravel()
@@ -509,21 +573,23 @@ def _band_solve(fac, rhs):
     return jnp.concatenate([xs, xl[None]])
 
 
-def _system_matvec(u, L, sw, edges, vmask, uv0, full, v):
+def _system_matvec(u, L, sw, edges, vmask, uv0, area, full, v):
     """The system's matrix times `v`: the Hessian of E (`full`) or J^T J."""
 
     def res(u):
         return jnp.concatenate(
-            [x.ravel() for x in _residuals(u, L, sw, edges, vmask, uv0)]
+            [x.ravel() for x in _residuals(u, L, sw, edges, vmask, uv0, area)]
         )
 
-    hv = jax.jvp(lambda u: jax.grad(_energy)(u, L, sw, edges, vmask, uv0), (u,), (v,))
+    hv = jax.jvp(
+        lambda u: jax.grad(_energy)(u, L, sw, edges, vmask, uv0, area), (u,), (v,)
+    )
     jv = jax.jvp(res, (u,), (v,))[1]
     (gn,) = jax.vjp(res, u)[1](jv)
     return jnp.where(full, hv[1], gn)
 
 
-def _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, full, b):
+def _system_solve(u, L, sw, edges, vmask, uv0, area, pos, free, shape, full, b):
     """(H + B^T B + pins) y = b, H the edge part at `u` (module comment above
     `_energy`), and one step of iterative refinement with the exact product
     (`_system_matvec`): the held coordinates give the exact solve only where
@@ -531,7 +597,9 @@ def _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, full, b):
     so a Newton step near it is exact to second order. `shape` `(nblk, nb)`
     carries the block sizes."""
     nblk, nb = shape.shape
-    fac = _band_factor(*_band_matrix(u, L, sw, edges, vmask, pos, free, nblk, nb, full))
+    fac = _band_factor(
+        *_band_matrix(u, L, sw, edges, vmask, area, pos, free, nblk, nb, full)
+    )
     n = pos.shape[0]
     live = vmask[:, None]
     nmat = _rigid(u, vmask).reshape(3, -1)  # (3, 2n)
@@ -551,10 +619,10 @@ def _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, full, b):
         return (x + nmat.T @ c).reshape(n, 2)
 
     y = apply(b)
-    return y + apply(b - _system_matvec(u, L, sw, edges, vmask, uv0, full, y))
+    return y + apply(b - _system_matvec(u, L, sw, edges, vmask, uv0, area, full, y))
 
 
-def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
+def _jax_newton(L, sw, edges, vmask, uv0, area, pos, free, shape, newton=NEWTON_NEAR):
     """`_least_strain.newton` in JAX (`lax.while_loop`, fixed shapes): Gauss-Newton
     steps with a backtracking Armijo line search; Newton steps (the Hessian)
     once the last step was below `newton` times the cloth's size, where the
@@ -563,7 +631,7 @@ def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
     host. Returns (u, converged)."""
 
     def energy(u):
-        return _energy(u, L, sw, edges, vmask, uv0)
+        return _energy(u, L, sw, edges, vmask, uv0, area)
 
     def cond(st):
         return ~st["done"] & (st["k"] < HOST_STEPS)
@@ -574,7 +642,7 @@ def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
         size = 1.0 + jnp.max(jnp.abs(u))
         use_newton = (st["last"] < newton * size) & ~st["bad"]
         du = -_system_solve(
-            u, L, sw, edges, vmask, uv0, pos, free, shape, use_newton, g
+            u, L, sw, edges, vmask, uv0, area, pos, free, shape, use_newton, g
         )
         slope = jnp.sum(g * du)
         finite = jnp.all(jnp.isfinite(du))
@@ -629,33 +697,39 @@ def _jax_newton(L, sw, edges, vmask, uv0, pos, free, shape, newton=NEWTON_NEAR):
 
 
 @partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _implicit(solver, u, L, sw, edges, vmask, uv0, pos, free, shape):
-    """`u` (the flattening's optimum for `L`, `sw`), with the tangent of the
-    optimum: du = -H^-1 d(grad_u E)/d(L, sw) [dL, dsw], E = 1/2 |r|^2; the
-    solve with H by `solver` ("banded": `_system_solve`; "sparse": the host)."""
+def _implicit(solver, u, L, sw, area, edges, vmask, uv0, pos, free, shape):
+    """`u` (the flattening's optimum for `L`, `sw` and `area`'s `A3`, `sa`),
+    with the tangent of the optimum: du = -H^-1 d(grad_u E)/d(L, sw, A3, sa)
+    [dL, dsw, dA3, dsa], E = 1/2 |r|^2; the solve with H by `solver`
+    ("banded": `_system_solve`; "sparse": the host)."""
     return u
 
 
-def _energy_grad(u, L, sw, edges, vmask, uv0):
-    return jax.grad(_energy)(u, L, sw, edges, vmask, uv0)
+def _energy_grad(u, L, sw, edges, vmask, uv0, area):
+    return jax.grad(_energy)(u, L, sw, edges, vmask, uv0, area)
 
 
 @_implicit.defjvp
 def _implicit_jvp(solver, primals, tangents):
-    u, L, sw, edges, vmask, uv0, pos, free, shape = primals
-    _, dL, dsw, *_ = tangents
-    _, rhs = jax.jvp(
-        lambda L, sw: _energy_grad(u, L, sw, edges, vmask, uv0), (L, sw), (dL, dsw)
-    )
+    u, L, sw, area, edges, vmask, uv0, pos, free, shape = primals
+    _, dL, dsw, (_, da3, dsa), *_ = tangents
+    faces = area[0]
+
+    def grad_at(L, sw, a3, sa):
+        return _energy_grad(u, L, sw, edges, vmask, uv0, (faces, a3, sa))
+
+    _, rhs = jax.jvp(grad_at, (L, sw, *area[1:]), (dL, dsw, da3, dsa))
 
     def matvec(v):
-        return jax.jvp(lambda u: _energy_grad(u, L, sw, edges, vmask, uv0), (u,), (v,))[
-            1
-        ]
+        return jax.jvp(
+            lambda u: _energy_grad(u, L, sw, edges, vmask, uv0, area), (u,), (v,)
+        )[1]
 
     def solve(_, b):
         if solver == "banded":
-            return _system_solve(u, L, sw, edges, vmask, uv0, pos, free, shape, True, b)
+            return _system_solve(
+                u, L, sw, edges, vmask, uv0, area, pos, free, shape, True, b
+            )
         return jax.pure_callback(
             strain.hessian_solve,
             jax.ShapeDtypeStruct(b.shape, b.dtype),
@@ -665,6 +739,7 @@ def _implicit_jvp(solver, primals, tangents):
             edges,
             vmask,
             uv0,
+            area,
             b,
             vmap_method="sequential",
         )
@@ -719,7 +794,7 @@ def evaluate(
     def cloth(verts, vmask, edges, ew, faces, fmask, uv0, rot, pos, free):
         xc = x3[verts]
         band = (pos, free, t.blocks)
-        u, ok = _flatten(xc, edges, ew, vmask, uv0, s.solver, band)
+        u, ok = _flatten(xc, edges, ew, faces, fmask, vmask, uv0, s.solver, band)
         cutuv = (u @ rot.T) * shrink
         # padded faces get a unit right triangle on both sides (zero strain)
         unit2 = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
