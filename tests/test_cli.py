@@ -317,3 +317,18 @@ def test_obj_polylines_round_trip(tmp_path):
     elements = [[int(i) for i in r.split()[1:]] for r in rows if r[:2] == "l "]
     assert elements == [[1, 2], [3, 4, 5, 6, 7], [8, 9, 10]]
     assert [r for r in rows if r[:2] == "o "] == ["o seam_0", "o seam_1", "o seam_2"]
+
+
+def test_fold_warning_names_each_folded_cloth_with_its_count():
+    """The CLI's warning names every cloth whose flattening has inverted
+    triangles, with the count ("1 triangle" singular), and none otherwise."""
+    import re
+
+    from jaxgeo.cli.pattern import _fold_warning
+
+    assert _fold_warning([("A1", 0), ("A2", 0)]) is None
+    warning = _fold_warning([("A1", 0), ("B2", 1), ("C3", 12)])
+    assert warning is not None and "folds over itself" in warning
+    named = dict(re.findall(r"cloth (\w+) \((\d+) triangles?\)", warning))
+    assert named == {"B2": "1", "C3": "12"}
+    assert "(1 triangle)" in warning and "(12 triangles)" in warning

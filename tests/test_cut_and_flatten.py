@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from jaxgeo import Mesh, shortest_path
+from jaxgeo import JaxgeoError, Mesh, shortest_path
 from jaxgeo.pattern import SNAP, CutMesh, cut_mesh, make_pattern
 from jaxgeo.surfaces import grid_faces
 
@@ -72,3 +72,13 @@ def test_a_cloth_too_curved_to_lie_flat_keeps_every_triangle_unfolded():
     # a penalty, not a constraint: faces may go below the floor, not far
     # (measured 0.864 at least here)
     assert np.min(flat / area) > 0.5 * AREA_FLOOR
+
+
+def test_a_closed_cloth_is_refused():
+    """A cloth without boundary cannot be flattened (LSCM pins two boundary
+    vertices): a `JaxgeoError` that says so, not an IndexError."""
+    from jaxgeo.cutting.flatten import flatten_cloth
+
+    m = trimesh.creation.icosphere(subdivisions=1)
+    with pytest.raises(JaxgeoError, match="closed cloth"):
+        flatten_cloth(np.asarray(m.vertices), np.asarray(m.faces))

@@ -40,6 +40,22 @@ def _floats(n: int, what: str):
     return parse
 
 
+def _fold_warning(inverted: list[tuple[str, int]]) -> str | None:
+    """The warning for the cloths (name, inverted triangles) whose flattening
+    folds, or None if none does."""
+    folded = [(name, n) for name, n in inverted if n]
+    if not folded:
+        return None
+    return (
+        "jaxgeo pattern: warning: the flattening of "
+        + ", ".join(
+            f"cloth {name} ({n} triangle{'s' if n > 1 else ''})" for name, n in folded
+        )
+        + " folds over itself (inverted triangles): too curved to lie flat "
+        "without folds; more seams through it would split it"
+    )
+
+
 def add_pattern_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "pattern",
@@ -53,7 +69,13 @@ def add_pattern_parser(subparsers) -> argparse.ArgumentParser:
         "--roll-width", type=float, required=True, help="fabric roll width (m)"
     )
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--valley", type=int, default=3, help="valley seams (2 peaks)")
+    p.add_argument(
+        "--valley",
+        type=int,
+        default=3,
+        help="two peak rings (3 boundary loops): seams from ring to ring "
+        "across the valley (jaxgeo.seams.bridged_layout)",
+    )
     p.add_argument("--steps", type=int, default=25, help="BFGS steps per round")
     p.add_argument("--rounds", type=int, default=3, help="calibration rounds")
     p.add_argument(
@@ -176,9 +198,7 @@ def run_pattern(args: argparse.Namespace) -> int:
     elif len(loops) == 2:
         layout = lay.radial_layout(mesh, args.seams)
     elif len(loops) == 3:
-        xs = np.asarray(mesh.vertices)[:, 0]
-        half = 0.1 * (xs.max() - xs.min())
-        layout = lay.peaks_layout(mesh, args.seams, args.valley, half)
+        layout = lay.bridged_layout(mesh, args.seams, args.valley)
     else:
         return _usage(
             f"need a membrane with 1, 2 or 3 boundary loops, {args.mesh} has "
@@ -286,20 +306,11 @@ def run_pattern(args: argparse.Namespace) -> int:
         f"(roll {args.roll_width} m); stress deviation RMS {total['rms']:.3g} kN/m, "
         f"max {total['max']:.3g} kN/m; written to {out}"
     )
-    folded = [
-        (p.name, c.cloth.inverted) for p, c in zip(pieces, cloths) if c.cloth.inverted
-    ]
-    if folded:
-        print(
-            "jaxgeo pattern: warning: the flattening of "
-            + ", ".join(
-                f"cloth {name} ({n} triangle{'s' if n > 1 else ''})"
-                for name, n in folded
-            )
-            + " folds over itself (inverted triangles): too curved to lie flat "
-            "without folds; more seams through it would split it",
-            file=sys.stderr,
-        )
+    warning = _fold_warning(
+        [(p.name, c.cloth.inverted) for p, c in zip(pieces, cloths)]
+    )
+    if warning:
+        print(warning, file=sys.stderr)
     if not fits:
         n = layout.n_seams
         suggest = math.ceil(args.seams * widths[k] / args.roll_width)

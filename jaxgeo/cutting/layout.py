@@ -266,12 +266,15 @@ def bridged_layout(
     `shift`); `sector` then plays no part in them.
 
     So every cloth touches a peak ring and none wraps round one, as the
-    valley-side cloths of `peaks_layout` do (they fold when flattened,
+    valley-side cloths of `peaks_layout` do (their flattening is not unique:
+    the reassembly RMS moves by 1.7 % with one-ulp changes of the cut,
     docs/cutting.md). The `shift` keeps seams off the mesh's lines y = 0 and
     x = 0, along which a seam would change its sequence of mesh elements at
-    any move of its ends. (On the built-in tent its cloths still fold next to
-    the rings, and the reassembly figures change much with 1° of the angles:
-    docs/cutting.md, "Session 17".)
+    any move of its ends. On the built-in tent, `bridged_layout(tent, 9, 3)`
+    and four variants 1°–5° apart give a uniform RMS stress deviation of
+    7.2–8.2 kN/m, each steady to 1e-5 relative under one-ulp changes
+    (docs/cutting.md, "Session 18"); the CLI lays it for a mesh with three
+    boundary loops.
     """
     loops = boundary_loops(mesh)
     if len(loops) != 3:
