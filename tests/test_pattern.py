@@ -340,3 +340,23 @@ def test_the_sail_check_does_not_move_with_one_ulp_changes_of_the_cut():
     assert m["inverted"] == 0 and m["unconverged"] == 0
     lo, hi = m["rms_range"]
     assert lo <= m["rms"] <= hi and hi - lo <= 1e-6 * m["rms"]
+
+
+def test_the_twin_peak_check_does_not_move_with_one_ulp_changes_of_the_cut():
+    """With the flattening's area term no twin-peak cloth folds, and the
+    check of `compare`'s layout (`bridged_layout(tent, 9, 3)`) is a function
+    of the layout as the sail's is: one-ulp copies of the cut give the same
+    RMS to 1e-4 (measured 7e-6: its sliver triangles, aspect up to 1:140,
+    amplify the flattening's tolerance more than the sail's cloths do), where
+    before the term the RMS of `peaks_layout`'s cut moved by a factor 4.6 and
+    this layout's had 84 inverted triangles (docs/cutting.md)."""
+    from jaxgeo.cutting import compare
+
+    tent = compare.cases()[0]
+    eps = 100 * np.asarray(compare.PRESTRESS.strain(compare.MATERIAL))[:2]
+    m = compare.measure(
+        tent.mesh, tent.layout, Compensation(*eps), "laser", roundings=2
+    )
+    assert m["inverted"] == 0 and m["unconverged"] == 0
+    lo, hi = m["rms_range"]
+    assert lo <= m["rms"] <= hi and hi - lo <= 1e-4 * m["rms"]

@@ -22,6 +22,7 @@ from scipy.sparse.linalg import splu
 
 __all__ = [
     "AREA_FLOOR",
+    "AREA_HESSIAN",
     "AREA_WEIGHT",
     "GN_ATOL",
     "GN_RTOL",
@@ -70,7 +71,7 @@ STALL_TOL = 1e-8
 AREA_FLOOR, AREA_WEIGHT = 0.9, 10.0
 #: the Hessian of a triangle's signed area (bilinear in its corners), in the
 #: dofs (x0, y0, x1, y1, x2, y2): d2 A / dx_k dy_(k+1) = 1/2, dx_k dy_(k-1) = -1/2
-_AREA_HESSIAN = 0.5 * np.array(
+AREA_HESSIAN = 0.5 * np.array(
     [
         [0, 0, 0, 1, 0, -1],
         [0, 0, -1, 0, 1, 0],
@@ -148,7 +149,7 @@ def system(u, L, sw, edges, vmask, uv0, area, full):
     fblk = jf[:, :, None] * jf[:, None, :]
     if full:
         act = np.where(r_f != 0, sa, 0.0)
-        fblk = fblk + (r_f * act)[:, None, None] * _AREA_HESSIAN
+        fblk = fblk + (r_f * act)[:, None, None] * AREA_HESSIAN
     fd = (2 * faces[:, :, None] + np.arange(2)).reshape(-1, 6)
     rows.append(np.repeat(fd, 6, 1).ravel())
     cols.append(np.tile(fd, (1, 6)).ravel())

@@ -51,8 +51,8 @@ from ..methods import Method
 from ..path import Status
 from . import _least_strain as strain
 from ._least_strain import (
-    _AREA_HESSIAN,
     AREA_FLOOR,
+    AREA_HESSIAN,
     AREA_WEIGHT,
     GN_ATOL,
     GN_RTOL,
@@ -498,7 +498,7 @@ def _band_matrix(u, L, sw, edges, vmask, area, pos, free, nblk, nb, full):
     on = jnp.where(r_f < 0, sa, 0.0)
     jf = (grad * on[:, None, None]).reshape(-1, 6)
     fblk = jf[:, :, None] * jf[:, None, :]
-    fblk = fblk + jnp.where(full, r_f * on, 0.0)[:, None, None] * _AREA_HESSIAN
+    fblk = fblk + jnp.where(full, r_f * on, 0.0)[:, None, None] * AREA_HESSIAN
     fd = (2 * pos[faces][:, :, None] + k2).reshape(-1, 6)
     ffree = free[faces].reshape(-1, 6)
     fshape = fblk.shape
