@@ -121,6 +121,14 @@ def _ray_hit(poly: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray | Non
     return poly[k] + u[k] * (poly[k + 1] - poly[k])
 
 
+def _ring_point(mesh, loop, poly: np.ndarray, centre: np.ndarray, th: float) -> float:
+    """The parameter on the ring `loop` (its polyline `poly`) where the plan ray
+    from the ring's `centre` at angle `th` (radians) meets it."""
+    hit = _ray_hit(poly, centre[:2], np.array([math.cos(th), math.sin(th)]))
+    assert hit is not None  # a ray from the ring's centre meets the ring
+    return loop_parameter(mesh, loop, hit)
+
+
 def _ring_seams(mesh, loops, ring: int, angles, keep=None):
     """Seams from `ring` at plan angles `angles` (around the ring's centre) to the
     outer loop (0) where the ray from the centre meets it (plan view, z up)."""
@@ -208,10 +216,7 @@ def peaks_layout(
         side = 1.0 if centre[0] > 0 else -1.0
         ang = np.deg2rad(np.linspace(-sector, sector, n_per_ring))
         ang = ang if side > 0 else np.pi - ang[::-1]
-        for th in ang:
-            hit = _ray_hit(rp, centre[:2], np.array([math.cos(th), math.sin(th)]))
-            assert hit is not None  # a ray from the ring's centre meets the ring
-            sa.append(loop_parameter(mesh, loops[ring], hit))
+        sa += [_ring_point(mesh, loops[ring], rp, centre, th) for th in ang]
         # outer arc beyond the valley band, through the far side of the loop
         x_cut = side * (valley_halfwidth + gap + shift * side)
         s0 = loop_parameter(mesh, outer, [x_cut, bottom, 0.0])
@@ -312,11 +317,7 @@ def bridged_layout(
         sb += b
 
     def on_ring(ring: int, deg: float) -> float:
-        rp, centre = rings[ring]
-        th = plan(ring, deg)
-        hit = _ray_hit(rp, centre, np.array([math.cos(th), math.sin(th)]))
-        assert hit is not None  # a ray from the ring's centre meets the ring
-        return loop_parameter(mesh, loops[ring], hit)
+        return _ring_point(mesh, loops[ring], *rings[ring], plan(ring, deg))
 
     la += [1] * len(bridges)
     lb += [2] * len(bridges)
