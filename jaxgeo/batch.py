@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 import zlib
 from collections.abc import Callable
+from functools import partial
 from typing import Literal
 
 import equinox as eqx
@@ -28,7 +29,7 @@ from ._errors import JaxgeoError
 from .geodesic import as_surface_point, checked_method, solve
 from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint
 from .mesh import Mesh
-from .methods import Method, first_attempt
+from .methods import Method, first_attempts
 from .normals import Weighting
 from .path import Path, Status
 
@@ -123,6 +124,17 @@ def _device_sharding() -> NamedSharding | None:
     return NamedSharding(grid, PartitionSpec("batch"))
 
 
+#: rows solved again per compiled call when they outgrew a cheaper attempt
+RETRY_CHUNK = 32
+
+
+def _set_rows(rows: np.ndarray, x, y):
+    """`x` (numpy, rows of a chunk) with `rows` replaced by `y`."""
+    x = np.array(x, copy=True)
+    x[rows] = y
+    return x
+
+
 def chunk_size_for(n: int, chunk_size: int | np.integer) -> int:
     """The chunk size for a batch of `n` pairs: `chunk_size`, or for a smaller
     batch the next power of two ≥ `n` (capped at `chunk_size`), so that a small
@@ -194,7 +206,11 @@ def shortest_paths(
     (pa, va), (pb, vb) = _as_rows(mesh, a), _as_rows(mesh, b)
     limit = jnp.asarray(max_distance, dtype)  # an array: no recompile per value
     padded = mesh.padded()  # padded to its size class: compiled once per class
-    first = first_attempt(m, max_points)
+    attempts = first_attempts(m, max_points)
+    # on one process without sharding, only the rows that outgrew an attempt
+    # are solved again (in sub-chunks of fixed size: one compile per size);
+    # else the whole chunk again with `m` (the same decision on every process)
+    rows_only = sharding is None and jax.process_count() == 1
     pieces = []
     for start in range(0, n, chunk_size):
         stop = min(start + chunk_size, n)
@@ -216,10 +232,19 @@ def shortest_paths(
                 _wait_for_all_processes()
             return jax.tree.map(lambda y: _gather(y)[:k], paths)
 
-        # a cheaper first attempt where one exists; the chunk again with `m` if a
-        # pair outgrew it (the same decision on every process: gathered stats)
-        piece = run(first) if first is not None else None
-        if piece is None or np.any(piece.stats.get("outgrew", 0)):
+        # a cheaper first attempt where one exists; the pairs that outgrew it
+        # again (gathered stats: the same decision on every process)
+        piece = run(attempts[0]) if attempts else None
+        if piece is not None and rows_only:
+            size = min(RETRY_CHUNK, chunk_size)
+            for method in [*attempts[1:], m]:
+                rows = np.flatnonzero(np.asarray(piece.stats.get("outgrew", 0)))
+                for r0 in range(0, rows.size, size):
+                    sub = rows[r0 : r0 + size]
+                    pad = np.concatenate([sub, np.full(size - sub.size, sub[-1])])
+                    again = run(method, [x[pad] for x in chunk], sub.size)
+                    piece = jax.tree.map(partial(_set_rows, sub), piece, again)
+        elif piece is None or np.any(piece.stats.get("outgrew", 0)):
             piece = run(m)
         pieces.append(piece)
         if progress is not None:

@@ -27,7 +27,7 @@ from .methods import (
     AnyMethod,
     Method,
     as_method,
-    first_attempt,
+    first_attempts,
     initial_status,
 )
 from .normals import Weighting
@@ -205,9 +205,8 @@ def shortest_path(
         # an array, not a static float: a new value must not recompile
         jnp.asarray(max_distance, mesh.vertices.dtype),
     )
-    first = first_attempt(m, max_points) if concrete else None
-    if first is not None:
-        path, dist = _solve_one(*args, first, max_points, False)
+    for cheaper in first_attempts(m, max_points) if concrete else []:
+        path, dist = _solve_one(*args, cheaper, max_points, False)
         if not int(path.stats.get("outgrew", 0)):
             return _checked(path, dist, throw, mesh, max_distance)
     path, dist = _solve_one(*args, m, max_points, not concrete)

@@ -36,8 +36,8 @@ class Exact(eqx.Module):
     `walls=False, detour_rounds=1` ~1.8x more; both miss the shortest path more
     often on scanned meshes (`docs/accuracy.md`).
     The default method. `corridor_capacity`: faces a corridor may hold (None:
-    `max_points`; `shortest_path` and `shortest_paths` then try 256 first, see
-    `first_attempt`)."""
+    `max_points`; `shortest_path` and `shortest_paths` then try 256 and 512
+    first, see `first_attempts`)."""
 
     max_starts: int = 8
     max_iterations: int | None = None  # None: the corridor capacity, >= 256
@@ -159,27 +159,34 @@ class Smooth(eqx.Module):
 
 AnyMethod = Exact | Laser | Smooth
 
-#: Faces a corridor of the exact engine holds in a first attempt (`first_attempt`).
-FIRST_CAPACITY = 256
+#: Faces a corridor of the exact engine holds in the cheaper attempts made
+#: before `max_points` (`first_attempts`), smallest first.
+FIRST_CAPACITIES = (256, 512)
 
 
-def first_attempt(method: AnyMethod, max_points: int) -> AnyMethod | None:
-    """A cheaper `method` to try first on concrete inputs, or None: the exact
-    engine (also under `Smooth`) with corridors of `FIRST_CAPACITY` faces instead
-    of `max_points`. Every flip round costs in proportion to the capacity, and
-    most paths cross far fewer faces: on random pairs of a 20k-face catenoid
-    (CPU time, `benchmarks/`) single paths took 163 instead of 252 ms and batches
-    ran 2.7× faster. A pair whose corridor outgrew it (`stats["outgrew"]`) is
-    solved again with `method` itself; compiling that second size happens only
-    when a path needs it."""
-    if max_points <= FIRST_CAPACITY:
-        return None
+def first_attempts(method: AnyMethod, max_points: int) -> list[AnyMethod]:
+    """Cheaper `method`s to try first on concrete inputs, in order: the exact
+    engine (also under `Smooth`) with corridors of each of `FIRST_CAPACITIES`
+    faces below `max_points`. Every flip round costs in proportion to the
+    capacity, and most paths cross far fewer faces: on random pairs of a
+    20k-face catenoid (CPU time, `benchmarks/`) single paths took 163 instead
+    of 252 ms and batches ran 2.7× faster with 256 alone. A pair whose
+    corridor outgrew an attempt (`stats["outgrew"]`) is solved again by the
+    next, and last by `method` itself; 512 before 1024 caught every pair of 30
+    that outgrew 256 there (a whole-wall detour corridor of a long path, most
+    often). Compiling a larger size happens only when a path needs it."""
     if isinstance(method, Exact) and method.corridor_capacity is None:
-        return dataclasses.replace(method, corridor_capacity=FIRST_CAPACITY)
+        return [
+            dataclasses.replace(method, corridor_capacity=c)
+            for c in FIRST_CAPACITIES
+            if c < max_points
+        ]
     if isinstance(method, Smooth):
-        exact = first_attempt(method.exact, max_points)
-        return None if exact is None else dataclasses.replace(method, exact=exact)
-    return None
+        return [
+            dataclasses.replace(method, exact=e)
+            for e in first_attempts(method.exact, max_points)
+        ]
+    return []
 
 
 Method = Literal["exact", "laser", "smooth"] | AnyMethod
