@@ -174,9 +174,9 @@ def test_pairs_that_outgrow_a_cheaper_attempt_are_solved_again(monkeypatch):
     (`methods.FIRST_CAPACITIES`); a pair whose corridor outgrew one is solved
     again by the next (a batch: only those rows, in sub-chunks of
     `batch.RETRY_CHUNK`). Shrunk here to 24 and 32 faces so that pairs of a
-    small icosphere outgrow both (10 and 5 of 12): every result equals the one solved at the
-    full capacity directly (the same corridors, padded differently: lengths to
-    rounding, 1e-12 relative)."""
+    small icosphere outgrow both (10 and 5 of 12): every result equals the one
+    solved at the full capacity directly (the same corridors, padded
+    differently: lengths to rounding, 1e-12 relative)."""
     from jaxgeo import batch, methods
 
     p1, p2 = _pairs(12, 2)

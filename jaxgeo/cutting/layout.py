@@ -317,7 +317,8 @@ def bridged_layout(
         sb += b
 
     def on_ring(ring: int, deg: float) -> float:
-        return _ring_point(mesh, loops[ring], *rings[ring], plan(ring, deg))
+        poly, centre = rings[ring]
+        return _ring_point(mesh, loops[ring], poly, centre, plan(ring, deg))
 
     la += [1] * len(bridges)
     lb += [2] * len(bridges)
