@@ -36,8 +36,8 @@ class Exact(eqx.Module):
     `walls=False, detour_rounds=1` ~1.8x more; both miss the shortest path more
     often on scanned meshes (`docs/accuracy.md`).
     The default method. `corridor_capacity`: faces a corridor may hold (None:
-    `max_points`; `shortest_path` and `shortest_paths` then try 256 and 512
-    first, see `first_attempts`)."""
+    `max_points`; `shortest_path` then tries 256 first, `shortest_paths` 256
+    and 512, see `first_attempts`)."""
 
     max_starts: int = 8
     max_iterations: int | None = None  # None: the corridor capacity, >= 256
@@ -174,7 +174,10 @@ def first_attempts(method: AnyMethod, max_points: int) -> list[AnyMethod]:
     corridor outgrew an attempt (`stats["outgrew"]`) is solved again by the
     next, and last by `method` itself; 512 before 1024 caught every pair of 30
     that outgrew 256 there (a whole-wall detour corridor of a long path, most
-    often). Compiling a larger size happens only when a path needs it."""
+    often). Compiling a larger size happens only when a path needs it.
+    `shortest_paths` climbs the whole ladder (for the pairs that outgrew only);
+    `shortest_path` makes the first attempt only, as each size is one more
+    compile per size class."""
     if isinstance(method, Exact) and method.corridor_capacity is None:
         return [
             dataclasses.replace(method, corridor_capacity=c)

@@ -173,7 +173,8 @@ def test_pairs_that_outgrow_a_cheaper_attempt_are_solved_again(monkeypatch):
     """The exact engine tries cheaper corridor capacities first
     (`methods.FIRST_CAPACITIES`); a pair whose corridor outgrew one is solved
     again by the next (a batch: only those rows, in sub-chunks of
-    `batch.RETRY_CHUNK`). Shrunk here to 24 and 32 faces so that pairs of a
+    `batch.RETRY_CHUNK`; a single path: the first attempt, then the full
+    capacity). Shrunk here to 24 and 32 faces so that pairs of a
     small icosphere outgrow both (10 and 5 of 12): every result equals the one
     solved at the full capacity directly (the same corridors, padded
     differently: lengths to rounding, 1e-12 relative)."""
