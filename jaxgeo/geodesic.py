@@ -205,9 +205,9 @@ def shortest_path(
         # an array, not a static float: a new value must not recompile
         jnp.asarray(max_distance, mesh.vertices.dtype),
     )
-    # one cheaper attempt (256 faces): each further size is another program to
-    # compile per size class, which a single path rarely pays back (in CI,
-    # `jaxgeo validate` at three resolutions took 419 s with 256 -> 512 -> 1024)
+    # one cheaper attempt (256 faces): each further size would be one more
+    # program to compile per size class and method for the few single paths
+    # that outgrow 256 (batches, which amortise it, climb 256 -> 512 -> ...)
     for cheaper in first_attempts(m, max_points)[:1] if concrete else []:
         path, dist = _solve_one(*args, cheaper, max_points, False)
         if not int(path.stats.get("outgrew", 0)):
