@@ -147,9 +147,8 @@ def system(u, L, sw, edges, vmask, uv0, area, full):
     r_f, jf = area_residuals(u, faces, a3, sa)
     jf = jf.reshape(-1, 6)
     fblk = jf[:, :, None] * jf[:, None, :]
-    if full:
-        act = np.where(r_f != 0, sa, 0.0)
-        fblk = fblk + (r_f * act)[:, None, None] * AREA_HESSIAN
+    if full:  # (r_f is zero where the term is off)
+        fblk = fblk + (r_f * sa)[:, None, None] * AREA_HESSIAN
     fd = (2 * faces[:, :, None] + np.arange(2)).reshape(-1, 6)
     rows.append(np.repeat(fd, 6, 1).ravel())
     cols.append(np.tile(fd, (1, 6)).ravel())

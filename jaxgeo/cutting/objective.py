@@ -331,13 +331,17 @@ def _area_params(x3, faces, fmask):
     return a3, sa
 
 
-def _area_residuals(u, faces, a3, sa):
-    """`_least_strain.area_residuals`' residuals (one-sided: zero on a face
-    above `AREA_FLOOR` of its 3-D area)."""
-    p = u[faces]
-    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    a2 = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+def _face_area_residual(p, a3, sa):
+    """`_least_strain.area_residuals`' residual of one face with flat corners
+    `p` `(3, 2)` (one-sided: zero above `AREA_FLOOR` of its 3-D area)."""
+    e1, e2 = p[1] - p[0], p[2] - p[0]
+    a2 = 0.5 * (e1[0] * e2[1] - e1[1] * e2[0])
     return sa * jnp.minimum(a2 - AREA_FLOOR * a3, 0.0)
+
+
+def _area_residuals(u, faces, a3, sa):
+    """The area term's residuals of every face (`_face_area_residual`)."""
+    return jax.vmap(_face_area_residual)(u[faces], a3, sa)
 
 
 def _residuals(u, L, sw, edges, vmask, uv0, area):
@@ -490,15 +494,12 @@ def _band_matrix(u, L, sw, edges, vmask, area, pos, free, nblk, nb, full):
     vals = sign[:, None, None] * blk[:, None] * fr
     # the area term: per face J_f^T J_f (+ r_f d2 r_f with full) on the six
     # dofs of its corners, which its edges already couple (the band holds it)
+    # (r_f is zero where the term is off, so r_f sa AREA_HESSIAN is its d2 part)
     faces, a3, sa = area
-    r_f = _area_residuals(u, faces, a3, sa)
-    p = u[faces]
-    nxt, prv = p[:, jnp.array([1, 2, 0])], p[:, jnp.array([2, 0, 1])]
-    grad = 0.5 * jnp.stack([nxt[..., 1] - prv[..., 1], prv[..., 0] - nxt[..., 0]], -1)
-    on = jnp.where(r_f < 0, sa, 0.0)
-    jf = (grad * on[:, None, None]).reshape(-1, 6)
+    r_f, jf = jax.vmap(jax.value_and_grad(_face_area_residual))(u[faces], a3, sa)
+    jf = jf.reshape(-1, 6)
     fblk = jf[:, :, None] * jf[:, None, :]
-    fblk = fblk + jnp.where(full, r_f * on, 0.0)[:, None, None] * AREA_HESSIAN
+    fblk = fblk + jnp.where(full, r_f * sa, 0.0)[:, None, None] * AREA_HESSIAN
     fd = (2 * pos[faces][:, :, None] + k2).reshape(-1, 6)
     ffree = free[faces].reshape(-1, 6)
     fshape = fblk.shape
