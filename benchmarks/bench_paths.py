@@ -6,11 +6,12 @@
 
 The protocol of issue 13: **random vertex pairs drawn uniformly** (not hand-picked
 long ones, where fixed per-call costs hide), on generated surfaces (an icosphere
-and a catenoid at about 5k, 20k and 100k faces) and on real meshes shipped inside
+and a catenoid at about 5k, 20k and 100k faces, and a 20k-face saddle: a disc
+with no cone vertex, where the exact paths are certified) and on real meshes shipped inside
 pymeshlab's wheel (`bone.ply`, a CT-scanned bone; `airplane.obj`, a CAD model;
 when pymeshlab is installed). Every method of METHODS runs single paths
 (`shortest_path`); the default method and the laser also run a batch of 1,000
-(`shortest_paths`, chunks of 256) on the 20k catenoid and on `airplane.obj`;
+(`shortest_paths`, chunks of 256) on the 20k catenoid, the saddle and `airplane.obj`;
 potpourri3d's `EdgeFlipGeodesicSolver.find_geodesic_path` and pygeodesic's exact
 MMP answer the same pairs in the same process. Times are CPU time
 (`time.process_time`, the fair measure on a shared machine; wall time beside it
@@ -72,13 +73,17 @@ def median_time(fn: Callable[[], object], repeats: int) -> float:
 
 def meshes(quick: bool):
     """(name, vertices, faces, batch?): generated surfaces at about 5k, 20k and
-    100k faces (quick: 5k, 20k), then the real meshes found in pymeshlab."""
+    100k faces (quick: 5k, 20k), a 20k-face saddle, then the real meshes found
+    in pymeshlab."""
     sizes = [(4, 50, 52), (5, 100, 100), (6, 224, 224)]
     for sub, n_around, n_height in sizes[: 2 if quick else 3]:
         v, f = surfaces.icosphere(sub)
         yield f"icosphere {len(f) // 1000}k", v, f, False
         v, f = surfaces.catenoid(n_around, n_height)
         yield f"catenoid {len(f) // 1000}k", v, f, 15_000 < len(f) < 30_000
+    # a cone-free disc, as anticlastic membranes are: certified paths
+    v, f = surfaces.saddle(n=100)
+    yield f"saddle {len(f) // 1000}k (disc, no cone vertex)", v, f, True
     for name in REAL_MESHES:
         path = pymeshlab_sample(name)
         if path is None:

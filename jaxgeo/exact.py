@@ -37,6 +37,15 @@ found, or, if that path's detours were tried already, from the best other one (t
 runner-up): two locally shortest paths may differ at two cone vertices, each of
 whose single detours alone gives a longer path.
 
+**Certificate.** Where the endpoints' component has no cone vertex (every interior
+angle sum Θ(v) ≥ 2π: flat or saddle-shaped everywhere, as anticlastic membranes
+are), each homotopy class holds exactly one locally shortest path
+(`_cone_free_and_disc`), so the detours, which stay in their class, are skipped;
+where that component is also a disc the first start to converge ends the search,
+and `stats.certified` is 1: the path is globally shortest. A start is converged
+only if its string wraps no vertex by more than a turn (which no wedge flip can
+release): such a string is shortest round the vertex, not on the surface.
+
 **Gradients.** The discrete choices (corridor, wrapped vertices) are made under
 `stop_gradient`; the length is then recomputed from the live vertices and endpoint
 barycentrics by unfolding the final corridor (an associative scan) and summing the
@@ -74,6 +83,10 @@ class ExactStats(eqx.Module):
     #: 1 if a lane's corridor outgrew `corridor_capacity` (its path then failed,
     #: or another may be shorter): solve again with a larger capacity
     outgrew: Int[Array, "*B"]
+    #: 1 if the path is certified globally shortest: its component is a disc
+    #: with no cone vertex (`_cone_free_and_disc`), where a locally shortest path is the
+    #: only one
+    certified: Int[Array, "*B"]
 
 
 def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
@@ -83,6 +96,37 @@ def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
 
 def _angle_sums(vertices, faces, angles):
     return jnp.zeros(vertices.shape[0], vertices.dtype).at[faces].add(angles)
+
+
+def _cone_free_and_disc(mesh: Mesh, theta, tol):
+    """Per connected component (indexed by label, `face_component`): whether no
+    interior vertex is a cone point (Θ(v) < 2π − tol, the cones `_detours` and
+    `_flips` act on), and whether the component is a disc (Euler characteristic
+    V − E + F = 1; 2, a sphere, cannot be cone-free).
+
+    Why it matters: a triangle mesh whose interior vertices all have Θ ≥ 2π is
+    locally CAT(0) (the link condition of a 2-dimensional piecewise Euclidean
+    complex; boundary points impose none), so its universal cover is CAT(0)
+    (Cartan–Hadamard; Bridson & Haefliger 1999, II.4.1), where a local geodesic
+    is the unique geodesic (II.1.4). Every locally shortest path is then the
+    only one in its homotopy class: the detours, which stay in the class (they
+    flip interior vertices, whose fans are discs), cannot find another, and on a
+    disc, with one class, the first start to converge is the shortest path.
+    Anticlastic membranes (saddles, sails, hypars) are such meshes."""
+    n = mesh.face_component.shape[0]  # labels < F (padding: −1, dropped)
+    fc = mesh.face_component
+    v_comp = jnp.where(mesh.fan_size > 0, fc[jnp.maximum(mesh.fan_faces[:, 0], 0)], -1)
+    e_face = mesh.edge_faces[:, 0]
+    e_comp = jnp.where(e_face >= 0, fc[jnp.maximum(e_face, 0)], -1)
+
+    def count(labels, weight=1):
+        idx = jnp.where(labels >= 0, labels, n)
+        return jnp.zeros(n, jnp.int32).at[idx].add(weight, mode="drop")
+
+    cone = mesh.fan_closed & (mesh.fan_size > 0) & (theta < 2 * jnp.pi - tol)
+    cones = count(v_comp, cone.astype(jnp.int32))
+    euler = count(v_comp) - count(e_comp) + count(fc)
+    return cones == 0, euler == 1
 
 
 # ------------------------------------------------------------------- endpoints
@@ -229,6 +273,14 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
         & (run <= nv)
         & (b >= a)
     )
+    # a wrap the loop cannot release: more than a whole turn round v, so the
+    # path is locally shortest only round the vertex, not on the surface
+    stuck = (
+        interior
+        & mesh.fan_closed[v]
+        & (theta[v] - beta < jnp.pi - tol)
+        & ((run > nv) | (b < a))
+    )
     p0, d, count = _other_way(mesh, corridor, v, a, b)
 
     # Fans of consecutive wrapped vertices may share faces (never of others). Two
@@ -241,7 +293,7 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     conflict = flip & prev_flip & (a <= prev_b + 1) & ~joined
     chain_start = jax.lax.cummax(jnp.where(flip & ~conflict, q, -1))
     taken = flip & ((q - chain_start) % 2 == 0)
-    return taken, v, a, b, p0, d, count
+    return taken, v, a, b, p0, d, count, jnp.any(stuck)
 
 
 def _other_way(mesh: Mesh, corridor, v, a, b):
@@ -445,7 +497,7 @@ def _round(mesh, theta, lane: _Lane, s, t, tol) -> _Lane:
     )
     pinned, m, fun_ok = _sleeve.funnel(sl)
     length = jax.vmap(_pinned_length)(sl, pinned, m)
-    taken, v, a, b, p0, d, count = jax.vmap(
+    taken, v, a, b, p0, d, count, stuck = jax.vmap(
         lambda c, sl_, p, m_: _flips(mesh, theta, c, sl_, p, m_, tol)
     )(lane.corridor, sl, pinned, m)
     n_taken = jnp.sum(taken, axis=-1, dtype=jnp.int32)
@@ -455,8 +507,10 @@ def _round(mesh, theta, lane: _Lane, s, t, tol) -> _Lane:
     new, new_n = _clean(mesh, new, new_n, s, t)
     good = sl.valid & fun_ok & (lane.n >= 1)  # (an empty corridor is no path)
     converged = good & (n_taken == 0)
+    # a string left wrapping a vertex by more than a turn, which no flip
+    # releases, is locally shortest only round it: no path of the surface
     status = jnp.where(
-        ~good,
+        ~good | (converged & stuck),
         Status.REFINE_FAILED,
         jnp.where(converged, Status.SUCCESS, jnp.where(fits, -1, Status.MAX_STEPS)),
     )
@@ -490,9 +544,27 @@ def _fresh(corridor, n, status0, dtype) -> _Lane:
     )
 
 
-def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
+def _won(lane: _Lane, pair, n_pairs):
+    """Pairs one of whose lanes (`pair`: per lane) converged."""
+    ok = lane.status == Status.SUCCESS
+    return jnp.zeros(n_pairs, bool).at[pair].max(ok)
+
+
+def _settle(lane: _Lane, pair, settle, won_before=False) -> _Lane:
+    """Stop the unfinished lanes of every pair in `settle` one of whose lanes has
+    converged (now or, `won_before`, earlier): there (`_cone_free_and_disc`) it is
+    the only locally shortest path, and the others would reach it again."""
+    won = _won(lane, pair, settle.shape[0]) | won_before
+    stop = settle[pair] & won[pair] & ~lane.done
+    status = jnp.where(stop, Status.REFINE_FAILED, lane.status).astype(jnp.int32)
+    return eqx.tree_at(lambda x: (x.done, x.status), lane, (lane.done | stop, status))
+
+
+def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol, pair, settle):
     """Flip until no wrapped vertex admits a shorter way round, for a batch of
-    starts (leading axis T of every argument but `mesh`, `theta`).
+    starts (leading axis T of every argument but `mesh`, `theta`, `settle`).
+    `pair` (T,): the pair each start belongs to; `settle` (P,): pairs whose
+    first converged start is their shortest path (the rest are stopped then).
 
     Starts converge in very different numbers of rounds (on random pairs of the
     20k catenoid 25 on average, up to 62): a loop over all T lanes at once would
@@ -514,7 +586,7 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
     if tasks <= POOL_MIN:
         lane = jax.lax.while_loop(
             lambda lane: jnp.any(~finished(lane)),
-            lambda lane: _round(mesh, theta, lane, s, t, tol),
+            lambda lane: _settle(_round(mesh, theta, lane, s, t, tol), pair, settle),
             _fresh(corridor, n, status0, dtype),
         )
         return result(lane)
@@ -545,6 +617,9 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol):
         lane, task, next_, results = state
         s_w, t_w = ends(task)
         lane = _round(mesh, theta, lane, s_w, t_w, tol)
+        # (a pair may have won in this round's lanes or in an earlier result)
+        earlier = _won(results, pair, settle.shape[0])
+        lane = _settle(lane, pair[jnp.minimum(task, tasks - 1)], settle, earlier)
         out = finished(lane)
         # write what finished, then hand out the next starts in worker order
         slot = jnp.where(out & (task < tasks), task, tasks)
@@ -719,6 +794,14 @@ def exact_solve(
     def lanes_of(x):  # (B, ...) → (B·k, ...)
         return jnp.repeat(x, k, axis=0)
 
+    # cone-free components: the detours cannot find a shorter path; discs among
+    # them: the first start to converge is the shortest (`_cone_free_and_disc`)
+    cone_free, disc = _cone_free_and_disc(smesh, theta, tol)
+    component = smesh.face_component[ss.point.face]
+    no_detours = cone_free[component]
+    certified = no_detours & disc[component]
+    pair = jnp.repeat(jnp.arange(n_pairs), k)
+
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
     # (pyright misreads *args of unknown length followed by more arguments)
     starts = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(  # pyright: ignore[reportCallIssue]
@@ -768,7 +851,7 @@ def exact_solve(
         # the round would repeat one already run (measured on random pairs of a
         # 20k-face catenoid, no cone vertices, so never a runner-up: 14 ms of a
         # 140 ms path, and 57 of the batch's ~400 trips)
-        used = used & fresh[:, None]
+        used = used & fresh[:, None] & ~no_detours[:, None]
         status0 = jnp.where(used, status0, Status.REFINE_FAILED)
         return corridor, n, status0.astype(jnp.int32)
 
@@ -805,7 +888,17 @@ def exact_solve(
             lambda a, b: jnp.where(p == 0, a, b), starts, part
         )
         lanes = _refine(
-            smesh, theta, corridor, n, status0, s_l, t_l, max_iterations, tol
+            smesh,
+            theta,
+            corridor,
+            n,
+            status0,
+            s_l,
+            t_l,
+            max_iterations,
+            tol,
+            pair,
+            certified & (p == 0),
         )
         lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
         ok = jnp.any(lanes.status == Status.SUCCESS, axis=1)
@@ -865,8 +958,10 @@ def exact_solve(
         jnp.zeros(n_pairs, jnp.int32),
         no.astype(jnp.int32),
     )
+    # (no detour phase at all where no pair takes detours)
+    n_phases = jnp.where(jnp.all(no_detours), 1, phases)
     win, _, _, found, outgrew, converged, first_status, _ = jax.lax.fori_loop(
-        0, phases, phase, init + (pending,)
+        0, n_phases, phase, init + (pending,)
     )
     status = jnp.where(found, Status.SUCCESS, first_status)
     stats = ExactStats(
@@ -875,7 +970,9 @@ def exact_solve(
         starts=jnp.sum(slot_ok, axis=1, dtype=jnp.int32),
         starts_converged=converged,
         corridor_length=win.n,
-        outgrew=outgrew.astype(jnp.int32),
+        # (a certified pair's path is the shortest whichever lanes outgrew)
+        outgrew=(outgrew & ~(certified & found)).astype(jnp.int32),
+        certified=(certified & found).astype(jnp.int32),
     )
     # (pyright misreads *args of unknown length followed by more arguments)
     return jax.vmap(lambda *a: _finish(mesh, *a, max_points))(  # pyright: ignore[reportCallIssue]
@@ -924,8 +1021,14 @@ def _finish(mesh, start, end, s, t, corridor, n, status, stats, max_points):
     status = jnp.where(ok & (count > max_points), Status.MAX_STEPS, status)
     zero = jnp.zeros((), jnp.int32)
     stats = jax.tree.map(lambda x: jnp.where(direct, zero, x), stats)
+    # (the straight segment is as short as the chord: certified)
     stats = eqx.tree_at(
-        lambda x: x.corridor_length, stats, jnp.where(direct, 1, stats.corridor_length)
+        lambda x: (x.corridor_length, x.certified),
+        stats,
+        (
+            jnp.where(direct, 1, stats.corridor_length),
+            jnp.where(direct, 1, stats.certified),
+        ),
     )
     return ExactResult(
         points=P3,

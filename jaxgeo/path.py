@@ -85,8 +85,10 @@ class Path(eqx.Module):
       `outcomes`, reads it).
     - `stats`: the method's diagnostics, a dict of arrays (as optimistix's
       `Solution.stats`): for `"exact"` the flip rounds (`iterations`) and `flips`
-      of the winning start, `starts` refined and `starts_converged`, and the final
-      `corridor_length` in faces; for `"laser"` the `branch_points`; for
+      of the winning start, `starts` refined and `starts_converged`, the final
+      `corridor_length` in faces, `outgrew` (a corridor outgrew its capacity)
+      and `certified` (1: globally shortest, on a disc with no cone vertex, see
+      `jaxgeo.exact`); for `"laser"` the `branch_points`; for
       `"smooth"` the exact method's, and of the smooth solve the strip
       `repair_rounds` and `releases`, whether the Newton solve `converged`, its
       final projected `grad_norm` and its `newton_iterations` (meaningless in a
