@@ -113,6 +113,7 @@ RULES: dict[str, tuple[tuple[str | None, ...], Any]] = {
     "landmark_pred_vertex": ((None, "V"), -1),
     "landmark_pred_edge": ((None, "E"), -1),
     "landmark_dist": ((None, "V"), np.inf),
+    "edge_cut": (("E",), 0),
 }
 
 

@@ -39,12 +39,14 @@ whose single detours alone gives a longer path.
 
 **Certificate.** Where the endpoints' component has no cone vertex (every interior
 angle sum Θ(v) ≥ 2π: flat or saddle-shaped everywhere, as anticlastic membranes
-are), each homotopy class holds exactly one locally shortest path
-(`_cone_free_and_disc`), so the detours, which stay in their class, are skipped;
-where that component is also a disc the first start to converge ends the search,
-and `stats.certified` is 1: the path is globally shortest. A start is converged
-only if its string wraps no vertex by more than a turn (which no wedge flip can
-release): such a string is shortest round the vertex, not on the surface.
+are), each homotopy class holds exactly one locally shortest path (`_topology`),
+so the detours, which stay in their class, are skipped, and a start stops as soon
+as another of its class has converged. On a disc there is one class: the first
+start to converge ends the search, and `stats.certified` is 1 (the path is
+globally shortest). On an annulus the class is the winding, counted by the cut
+edges a corridor crosses (`jaxgeo._cuts`). A start is converged only if its
+string wraps no vertex by more than a turn (which no wedge flip can release):
+such a string is shortest round the vertex, not on the surface.
 
 **Gradients.** The discrete choices (corridor, wrapped vertices) are made under
 `stop_gradient`; the length is then recomputed from the live vertices and endpoint
@@ -84,7 +86,7 @@ class ExactStats(eqx.Module):
     #: or another may be shorter): solve again with a larger capacity
     outgrew: Int[Array, "*B"]
     #: 1 if the path is certified globally shortest: its component is a disc
-    #: with no cone vertex (`_cone_free_and_disc`), where a locally shortest path is the
+    #: with no cone vertex (`_topology`), where a locally shortest path is the
     #: only one
     certified: Int[Array, "*B"]
 
@@ -98,11 +100,12 @@ def _angle_sums(vertices, faces, angles):
     return jnp.zeros(vertices.shape[0], vertices.dtype).at[faces].add(angles)
 
 
-def _cone_free_and_disc(mesh: Mesh, theta, tol):
+def _topology(mesh: Mesh, theta, tol):
     """Per connected component (indexed by label, `face_component`): whether no
     interior vertex is a cone point (Θ(v) < 2π − tol, the cones `_detours` and
-    `_flips` act on), and whether the component is a disc (Euler characteristic
-    V − E + F = 1; 2, a sphere, cannot be cone-free).
+    `_flips` act on), whether it is a disc (Euler characteristic V − E + F = 1;
+    2, a sphere, cannot be cone-free), and whether it is an annulus with a cut
+    (`jaxgeo._cuts`: characteristic 0, a boundary, cut edges).
 
     Why it matters: a triangle mesh whose interior vertices all have Θ ≥ 2π is
     locally CAT(0) (the link condition of a 2-dimensional piecewise Euclidean
@@ -110,23 +113,52 @@ def _cone_free_and_disc(mesh: Mesh, theta, tol):
     (Cartan–Hadamard; Bridson & Haefliger 1999, II.4.1), where a local geodesic
     is the unique geodesic (II.1.4). Every locally shortest path is then the
     only one in its homotopy class: the detours, which stay in the class (they
-    flip interior vertices, whose fans are discs), cannot find another, and on a
-    disc, with one class, the first start to converge is the shortest path.
-    Anticlastic membranes (saddles, sails, hypars) are such meshes."""
+    flip interior vertices, whose fans are discs), cannot find another, and two
+    starts of one class reach the same path. A disc has one class; an annulus
+    one per winding, which the cut counts (`_winding`). Anticlastic membranes
+    (saddles, sails, hypars, tents with a ring) are such meshes."""
     n = mesh.face_component.shape[0]  # labels < F (padding: −1, dropped)
     fc = mesh.face_component
     v_comp = jnp.where(mesh.fan_size > 0, fc[jnp.maximum(mesh.fan_faces[:, 0], 0)], -1)
     e_face = mesh.edge_faces[:, 0]
     e_comp = jnp.where(e_face >= 0, fc[jnp.maximum(e_face, 0)], -1)
 
-    def count(labels, weight=1):
+    def count(labels, weight: Array | int = 1):
         idx = jnp.where(labels >= 0, labels, n)
         return jnp.zeros(n, jnp.int32).at[idx].add(weight, mode="drop")
 
     cone = mesh.fan_closed & (mesh.fan_size > 0) & (theta < 2 * jnp.pi - tol)
     cones = count(v_comp, cone.astype(jnp.int32))
     euler = count(v_comp) - count(e_comp) + count(fc)
-    return cones == 0, euler == 1
+    cut = count(e_comp, (mesh.edge_cut != 0).astype(jnp.int32))
+    return cones == 0, euler == 1, (euler == 0) & (cut > 0)
+
+
+def _on_cut(mesh: Mesh, end: _End):
+    """Does the endpoint lie on a cut edge or vertex? (Its winding is then
+    ambiguous: its corridors may begin on either side of the cut.)"""
+    cut = mesh.edge_cut != 0
+    spokes = mesh.vertex_faces[end.index]  # faces round a vertex endpoint
+    round_vertex = jnp.any(
+        (spokes >= 0)[:, None]
+        & cut[mesh.face_edges[jnp.maximum(spokes, 0)]]
+        & (mesh.faces[jnp.maximum(spokes, 0)] != end.index),  # (the opposite edge)
+        axis=1,
+    )
+    return jnp.where(
+        end.kind == VERTEX,
+        jnp.any(round_vertex),
+        jnp.where(end.kind == EDGE, cut[end.index], False),
+    )
+
+
+def _winding(mesh: Mesh, corridor, n):
+    """The signed count of the cut edges a corridor's portals cross."""
+    edge, *_ = _sleeve.portals(mesh.faces, mesh.face_edges, corridor, n)
+    live = jnp.arange(corridor.shape[0]) < n - 1
+    forward = corridor == mesh.edge_faces[edge, 0]
+    sign = jnp.where(forward, 1, -1) * mesh.edge_cut[edge]
+    return jnp.sum(jnp.where(live, sign, 0))
 
 
 # ------------------------------------------------------------------- endpoints
@@ -261,6 +293,10 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     tau = jnp.arctan2(_sleeve.cross2d(d_in, d_out), jnp.sum(d_in * d_out, -1))
     is_left = sleeve.inst_is_left[inst]
     beta = jnp.pi + jnp.where(is_left, tau, -tau)
+    # the string bends round the wall, so the angle on the corridor's side is at
+    # least π; below, it went round v by more than 2π and the arctangent wrapped
+    # (a U-turn round the wide side of a saddle vertex, seen on the catenoid)
+    beta = jnp.where(beta < jnp.pi - tol, beta + 2 * jnp.pi, beta)
     v = sleeve.inst_vertex[inst]
     nv = mesh.fan_size[v]
     a, b = sleeve.inst_first[inst], sleeve.inst_last[inst]
@@ -483,6 +519,10 @@ class _Lane(eqx.Module):  # one lane, or L of them (leading axes)
     done: Bool[Array, "*L"]
 
 
+#: Windings told apart on an annulus (`_winding`; a start beyond is refined to
+#: the end, as on any mesh).
+WINDINGS = 4
+
 #: Lane batches up to this size are refined one lane per start; larger ones by a
 #: pool of workers a quarter their size (at least this many), each taking the next
 #: start when its own has converged (`_refine`).
@@ -544,27 +584,32 @@ def _fresh(corridor, n, status0, dtype) -> _Lane:
     )
 
 
-def _won(lane: _Lane, pair, n_pairs):
-    """Pairs one of whose lanes (`pair`: per lane) converged."""
+def _won(lane: _Lane, key, n_keys: int):
+    """Keys (`_refine`) one of whose lanes converged."""
+    idx = jnp.where(key >= 0, key, n_keys)
     ok = lane.status == Status.SUCCESS
-    return jnp.zeros(n_pairs, bool).at[pair].max(ok)
+    return jnp.zeros(n_keys, bool).at[idx].max(ok, mode="drop")
 
 
-def _settle(lane: _Lane, pair, settle, won_before=False) -> _Lane:
-    """Stop the unfinished lanes of every pair in `settle` one of whose lanes has
-    converged (now or, `won_before`, earlier): there (`_cone_free_and_disc`) it is
-    the only locally shortest path, and the others would reach it again."""
-    won = _won(lane, pair, settle.shape[0]) | won_before
-    stop = settle[pair] & won[pair] & ~lane.done
+def _settle(
+    lane: _Lane, key, n_keys: int, won_before: Bool[Array, " K"] | bool = False
+) -> _Lane:
+    """Stop the unfinished lanes whose key (`_refine`) has a converged lane (now
+    or, `won_before`, earlier): it is the only locally shortest path of their
+    class (`_topology`), which they would reach again."""
+    won = _won(lane, key, n_keys) | won_before
+    stop = (key >= 0) & won[jnp.maximum(key, 0)] & ~lane.done
     status = jnp.where(stop, Status.REFINE_FAILED, lane.status).astype(jnp.int32)
     return eqx.tree_at(lambda x: (x.done, x.status), lane, (lane.done | stop, status))
 
 
-def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol, pair, settle):
+def _refine(
+    mesh, theta, corridor, n, status0, s, t, max_iterations, tol, key, n_keys: int
+):
     """Flip until no wrapped vertex admits a shorter way round, for a batch of
-    starts (leading axis T of every argument but `mesh`, `theta`, `settle`).
-    `pair` (T,): the pair each start belongs to; `settle` (P,): pairs whose
-    first converged start is their shortest path (the rest are stopped then).
+    starts (leading axis T of every argument but `mesh`, `theta`). `key` (T,):
+    starts of one key (< `n_keys`) reach the same path, and the others stop
+    when one has converged (−1: none).
 
     Starts converge in very different numbers of rounds (on random pairs of the
     20k catenoid 25 on average, up to 62): a loop over all T lanes at once would
@@ -586,7 +631,7 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol, pair, 
     if tasks <= POOL_MIN:
         lane = jax.lax.while_loop(
             lambda lane: jnp.any(~finished(lane)),
-            lambda lane: _settle(_round(mesh, theta, lane, s, t, tol), pair, settle),
+            lambda lane: _settle(_round(mesh, theta, lane, s, t, tol), key, n_keys),
             _fresh(corridor, n, status0, dtype),
         )
         return result(lane)
@@ -618,8 +663,8 @@ def _refine(mesh, theta, corridor, n, status0, s, t, max_iterations, tol, pair, 
         s_w, t_w = ends(task)
         lane = _round(mesh, theta, lane, s_w, t_w, tol)
         # (a pair may have won in this round's lanes or in an earlier result)
-        earlier = _won(results, pair, settle.shape[0])
-        lane = _settle(lane, pair[jnp.minimum(task, tasks - 1)], settle, earlier)
+        earlier = _won(results, key, n_keys)
+        lane = _settle(lane, key[jnp.minimum(task, tasks - 1)], n_keys, earlier)
         out = finished(lane)
         # write what finished, then hand out the next starts in worker order
         slot = jnp.where(out & (task < tasks), task, tasks)
@@ -794,18 +839,29 @@ def exact_solve(
     def lanes_of(x):  # (B, ...) → (B·k, ...)
         return jnp.repeat(x, k, axis=0)
 
-    # cone-free components: the detours cannot find a shorter path; discs among
-    # them: the first start to converge is the shortest (`_cone_free_and_disc`)
-    cone_free, disc = _cone_free_and_disc(smesh, theta, tol)
+    # cone-free components: the detours cannot find a shorter path, and two
+    # starts of one class reach the same one (`_topology`)
+    cone_free, disc, annulus = _topology(smesh, theta, tol)
     component = smesh.face_component[ss.point.face]
     no_detours = cone_free[component]
     certified = no_detours & disc[component]
-    pair = jnp.repeat(jnp.arange(n_pairs), k)
+    on_cut = jax.vmap(lambda e: _on_cut(smesh, e))
+    known = certified | (no_detours & annulus[component] & ~on_cut(ss) & ~on_cut(ts))
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
     # (pyright misreads *args of unknown length followed by more arguments)
     starts = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(  # pyright: ignore[reportCallIssue]
         slots.reshape(-1), slot_ok.reshape(-1), lanes_of(vs), lanes_of(vt), s_l, t_l
+    )
+    # a start's key: its pair and winding, where the class is known (windings
+    # beyond ±WINDINGS: none)
+    winding = jax.vmap(lambda c, m_: _winding(smesh, c, m_))(starts[0], starts[1])
+    pair = jnp.repeat(jnp.arange(n_pairs), k)
+    n_keys = n_pairs * (2 * WINDINGS + 1)
+    key = jnp.where(
+        known[pair] & (jnp.abs(winding) <= WINDINGS),
+        pair * (2 * WINDINGS + 1) + winding + WINDINGS,
+        -1,
     )
     # Phase 0 refines the k starts of every pair; then each of `detour_rounds`
     # rounds takes the detours of the best path so far, k at a time. All phases
@@ -897,8 +953,8 @@ def exact_solve(
             t_l,
             max_iterations,
             tol,
-            pair,
-            certified & (p == 0),
+            jnp.where(p == 0, key, -1),
+            n_keys,
         )
         lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
         ok = jnp.any(lanes.status == Status.SUCCESS, axis=1)

@@ -22,6 +22,7 @@ import trimesh
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from scipy.sparse.csgraph import connected_components
 
+from ._cuts import annulus_cuts
 from ._errors import JaxgeoError
 from ._fans import vertex_fans
 from ._landmarks import DEFAULT_LANDMARKS, landmark_forests
@@ -163,6 +164,9 @@ class Mesh(eqx.Module):
       shortest-path forests of `landmarks` landmark slots on the graph of vertices
       and edge midpoints, from which the exact method reads its starting paths
       (`jaxgeo._landmarks`).
+    - `edge_cut`: `(E,)` ±1 on the edges of a cut across every annulus
+      component, 0 elsewhere: how the exact method tells a path's winding
+      (`jaxgeo._cuts`).
 
     **Size classes.** The arrays above have the mesh's real sizes. The solvers
     are handed `mesh.padded()`, the same arrays padded to the mesh's
@@ -196,6 +200,7 @@ class Mesh(eqx.Module):
     landmark_pred_vertex: Int[Array, "M V"]
     landmark_pred_edge: Int[Array, "M E"]
     landmark_dist: Float[Array, "M V"]
+    edge_cut: Int[Array, " E"]
 
     def __init__(
         self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS
@@ -240,6 +245,9 @@ class Mesh(eqx.Module):
         self.landmark_pred_vertex = jnp.asarray(forests["pred_vertex"])
         self.landmark_pred_edge = jnp.asarray(forests["pred_edge"])
         self.landmark_dist = jnp.asarray(forests["dist_vertex"])
+        self.edge_cut = jnp.asarray(
+            annulus_cuts(v, f, edges, edge_faces, component), jnp.int32
+        )
 
     @property
     def n_vertices(self) -> int:

@@ -58,6 +58,7 @@ LAYERS: dict[str, tuple[set[str], set[str]]] = {
             "repair",
             "_fans",
             "_landmarks",
+            "_cuts",
             "_padding",
             "surfaces",
             "_grids",
