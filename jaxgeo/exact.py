@@ -637,8 +637,19 @@ def _refine(
         return result(lane)
 
     workers = max(POOL_MIN, -(-tasks // 4))
-    # the queue: the starts to refine first (the rest are already done)
-    order = jnp.argsort(status0 >= 0, stable=True).astype(jnp.int32)
+    # the queue: the starts to refine, the first of every key first (its others
+    # will mostly be settled by the time they are handed out), then the rest,
+    # which are already done
+    by_key = jnp.argsort(key, stable=True)
+    sorted_key = key[by_key]
+    first_of_key = jnp.searchsorted(sorted_key, sorted_key, side="left")
+    rank = (
+        jnp.zeros(tasks, jnp.int32)
+        .at[by_key]
+        .set((jnp.arange(tasks) - first_of_key).astype(jnp.int32))
+    )
+    rank = jnp.where(key >= 0, rank, 0)
+    order = jnp.lexsort((rank, status0 >= 0)).astype(jnp.int32)
     live = jnp.sum(status0 < 0, dtype=jnp.int32)
     results = _fresh(corridor, n, status0, dtype)
 
@@ -675,7 +686,9 @@ def _refine(
         pick = next_ + rank
         new_task = jnp.where(pick < live, order[jnp.minimum(pick, tasks - 1)], tasks)
         task = jnp.where(out, new_task, task)
-        fresh = load(task)
+        # (a start whose key has converged already is settled as it is loaded)
+        won = _won(results, key, n_keys)
+        fresh = _settle(load(task), key[jnp.minimum(task, tasks - 1)], n_keys, won)
         lane = jax.tree.map(
             lambda f, x: jnp.where(out.reshape(out.shape + (1,) * (x.ndim - 1)), f, x),
             fresh,

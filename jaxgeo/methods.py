@@ -31,7 +31,10 @@ class Exact(eqx.Module):
     graph paths refined by wedge flips until locally shortest, then `detours`
     corridors round the other side of the best path's nearest cone vertices and,
     with `walls`, 8 corridors moved across a stretch of one of its walls
-    (`detour_rounds` times); the shortest kept. Length and points differentiable.
+    (`detour_rounds` times); the shortest kept. Where the mesh has no cone vertex
+    (anticlastic membranes) the detours are skipped and a start stops once
+    another of its class has converged, exactly (`jaxgeo.exact`, "Certificate").
+    Length and points differentiable.
     `max_starts=4` is ~1.5x faster per single path (~1.7x per path of a batch), and
     `walls=False, detour_rounds=1` ~1.8x more; both miss the shortest path more
     often on scanned meshes (`docs/accuracy.md`).

@@ -167,10 +167,13 @@ def test_worker_pool_refines_every_start_as_one_lane_would(monkeypatch):
     theta = exact.vertex_angle_sums(mesh.vertices, mesh.faces)
     status0 = jnp.where(n >= 2, -1, 0).astype(jnp.int32)  # a face: nothing to do
     tol = 10 * float(jnp.finfo(jnp.float64).eps) ** 0.5
+    no_key = jnp.full(n.shape, -1)  # (no start settles another: cone vertices)
 
     def refine():  # a new function each time: traced with POOL_MIN as set now
         return jax.jit(
-            lambda *x: exact._refine(mesh, theta, *x, max_iterations=256, tol=tol)
+            lambda *x: exact._refine(
+                mesh, theta, *x, max_iterations=256, tol=tol, key=no_key, n_keys=1
+            )
         )(corridor, n, status0, s, t)
 
     lanes = refine()  # 40 starts ≤ POOL_MIN: one lane each
