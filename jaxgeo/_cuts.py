@@ -5,7 +5,7 @@ characteristic 0 and a boundary is an annulus (a catenoid, a tent with one ring)
 its paths between two points fall into classes by how many times they wind round
 it, and a path's class is its signed count of crossings of a *cut*, an edge path
 from one boundary loop to the other. The exact engine reads a start corridor's
-class from the cut edges its portals cross (`jaxgeo.exact._classes`): on a
+class from the cut edges its portals cross (`jaxgeo.exact._winding`): on a
 component with no cone vertex, two starts of one class reach the same locally
 shortest path, so the later ones can stop.
 
@@ -28,8 +28,10 @@ def annulus_cuts(
     edges: np.ndarray,
     edge_faces: np.ndarray,
     face_component: np.ndarray,
+    vertex_component: np.ndarray,
 ) -> np.ndarray:
-    """`edge_cut (E,)` int32 (see the module docstring)."""
+    """`edge_cut (E,)` int32 (see the module docstring); `vertex_component`: −1
+    for a vertex in no face."""
     n_v, n_e = vertices.shape[0], edges.shape[0]
     cut = np.zeros(n_e, np.int32)
     on_boundary = edge_faces[:, 1] < 0
@@ -41,11 +43,9 @@ def annulus_cuts(
     _, loop = connected_components(graph, directed=False)
     n_c = int(face_component.max()) + 1
     edge_comp = face_component[edge_faces[:, 0]]
-    vert_comp = np.full(n_v, -1)
-    vert_comp[faces.reshape(-1)] = np.repeat(face_component, 3)
-    used = vert_comp >= 0
+    used = vertex_component >= 0
     euler = (
-        np.bincount(vert_comp[used], minlength=n_c)
+        np.bincount(vertex_component[used], minlength=n_c)
         - np.bincount(edge_comp, minlength=n_c)
         + np.bincount(face_component, minlength=n_c)
     )

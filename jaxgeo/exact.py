@@ -302,21 +302,12 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     a, b = sleeve.inst_first[inst], sleeve.inst_last[inst]
     run = b - a + 2  # corridor faces a … b + 1 hold v
     interior = (q >= 1) & (q <= m - 2)
-    flip = (
-        interior
-        & mesh.fan_closed[v]
-        & (theta[v] - beta < jnp.pi - tol)
-        & (run <= nv)
-        & (b >= a)
-    )
+    shorter = interior & mesh.fan_closed[v] & (theta[v] - beta < jnp.pi - tol)
+    fits = (run <= nv) & (b >= a)
+    flip = shorter & fits
     # a wrap the loop cannot release: more than a whole turn round v, so the
     # path is locally shortest only round the vertex, not on the surface
-    stuck = (
-        interior
-        & mesh.fan_closed[v]
-        & (theta[v] - beta < jnp.pi - tol)
-        & ((run > nv) | (b < a))
-    )
+    stuck = shorter & ~fits
     p0, d, count = _other_way(mesh, corridor, v, a, b)
 
     # Fans of consecutive wrapped vertices may share faces (never of others). Two

@@ -246,7 +246,8 @@ class Mesh(eqx.Module):
         self.landmark_pred_edge = jnp.asarray(forests["pred_edge"])
         self.landmark_dist = jnp.asarray(forests["dist_vertex"])
         self.edge_cut = jnp.asarray(
-            annulus_cuts(v, f, edges, edge_faces, component), jnp.int32
+            annulus_cuts(v, f, edges, edge_faces, component, vertex_component),
+            jnp.int32,
         )
 
     @property
