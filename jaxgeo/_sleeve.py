@@ -11,9 +11,10 @@ right vertex, k + 2 for the vertex of f_{k+1} opposite portal k. A vertex stays 
 same instance over the consecutive portals it belongs to (`inst_first` …
 `inst_last`), which is how the string pull and the flips tell a vertex the path wraps.
 
-The unfolding is an associative scan over the fixed capacity (masked past n), so
-that `jax.grad` goes through it: it is also the differentiable length of the frozen
-combinatorics (envelope theorem, see `jaxgeo.exact`).
+The unfolding is two prefix sums over the fixed capacity (masked past n), of the
+turning angles and of the portals' origins, so that `jax.grad` goes through it:
+it is also the differentiable length of the frozen combinatorics (envelope
+theorem, see `jaxgeo.exact`).
 """
 
 from __future__ import annotations
@@ -124,33 +125,27 @@ def unfold(
     # Portal k's frame: origin at its right vertex, x towards its left one, y
     # backwards (the next face lies at y < 0). In it the next vertex is
     # w = (ox, −oy) and the next portal is (w, r) or (l, w): the frame of portal
-    # k + 1 is z_k = t_k + c_k z_{k+1} with a unit complex c_k. Portal k's frame in
-    # the plane is the composition of the maps of portals 0 … k − 1, an associative
-    # scan (log₂ C vector steps instead of C dependent ones).
+    # k + 1 is z_k = t_k + c_k z_{k+1} with a unit complex c_k = e^{iφ_k}. Portal
+    # k's frame in the plane is the composition of the maps of portals 0 … k − 1:
+    # rotation by Φ_k = φ_0 + … + φ_{k−1} and origin T_k = Σ_{j<k} e^{iΦ_j} t_j, two
+    # prefix sums (vector steps, no C dependent ones; as accurate as the product
+    # of the unit complexes, ~k eps).
     wx, wy = ox, -oy
     keep_c = jnp.stack([wx, wy], -1)  # (l, r) → (w, r): x turns towards w
     move_c = jnp.stack([el - wx, -wy], -1)  # → (l, w): origin w, x towards l
     c = jnp.where(keep_right[:, None], keep_c, move_c)
     c_norm = safe_norm(c)
-    c = jnp.where(
-        (c_norm > 0)[:, None],
-        c / jnp.where(c_norm > 0, c_norm, 1.0)[:, None],
-        jnp.array([1.0, 0.0], dtype),
+    # (a degenerate portal, or a dead one, turns by 0)
+    phi = jnp.where(
+        (c_norm > 0) & live,
+        jnp.arctan2(c[:, 1], jnp.where(c_norm > 0, c[:, 0], 1.0)),
+        0.0,
     )
-    t = jnp.where(keep_right[:, None], 0.0, jnp.stack([wx, wy], -1))
-    # dead portals map identically
-    c = jnp.where(live[:, None], c, jnp.array([1.0, 0.0], dtype))
-    t = jnp.where(live[:, None], t, 0.0)
-
-    def compose(a, b):  # a after b: z ↦ t_a + c_a (t_b + c_b z)
-        (ca, ta), (cb, tb) = a, b
-        return _cmul(ca, cb), ta + _cmul(ca, tb)
-
-    # the frame of portal k is the composition of the maps of portals < k
-    C, T = jax.lax.associative_scan(compose, (c, t))
-    one = jnp.array([[1.0, 0.0]], dtype)
-    C = jnp.concatenate([one, C[:-1]])
-    T = jnp.concatenate([jnp.zeros((1, 2), dtype), T[:-1]])
+    t = jnp.where((keep_right | ~live)[:, None], 0.0, jnp.stack([wx, wy], -1))
+    turn = jnp.cumsum(phi) - phi  # Φ_k (exclusive)
+    C = jnp.stack([jnp.cos(turn), jnp.sin(turn)], -1)
+    Ct = _cmul(C, t)
+    T = jnp.cumsum(Ct, axis=0) - Ct  # T_k (exclusive)
     w2 = T + _cmul(C, jnp.stack([wx, wy], -1))
 
     # instances: 0, 1 = portal 0's ends; k + 2 = vertex opposite portal k. Portal
