@@ -515,16 +515,28 @@ class _Lane(eqx.Module):  # one lane, or L of them (leading axes)
 WINDINGS = 4
 
 #: Lane batches up to this size are refined one lane per start; larger ones by a
-#: pool of workers a quarter their size (at least this many), each taking the next
-#: start when its own has converged (`_refine`).
-POOL_MIN = 64
+#: pool of `1/POOL_FRACTION` as many workers (at least this many), each taking the
+#: next start when its own has converged (`_refine`). A single pair's 8 starts
+#: too: where starts of one class settle each other (no cone vertex), the
+#: others mostly need not run at all, and elsewhere 4 lanes at a time cost little
+#: more per start than 8 (25 random pairs, CPU per path: 20k catenoid 39 -> 27 ms,
+#: `bone.ply` 48 -> 43, `airplane.obj` 100 -> 84; lengths equal to 4e-16).
+POOL_MIN = 4
+POOL_FRACTION = 4
+
+#: The pool's width shrinks by this factor once its queue is empty and at most
+#: that many workers still run (`_refine`).
+POOL_SHRINK = 8
 
 
 def _round(mesh, theta, lane: _Lane, s, t, tol) -> _Lane:
     """One flip round of every lane: unfold, pull the string, flip, clean."""
     active = ~lane.done
+    # a finished lane is unfolded as an empty corridor, so that the funnel's and
+    # `_clean`'s loops, which run as long as their longest lane, skip it
+    live_n = jnp.where(active, lane.n, 0)
     sl = jax.vmap(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
-        lane.corridor, lane.n, s, t
+        lane.corridor, live_n, s, t
     )
     pinned, m, fun_ok = _sleeve.funnel(sl)
     length = jax.vmap(_pinned_length)(sl, pinned, m)
@@ -533,7 +545,7 @@ def _round(mesh, theta, lane: _Lane, s, t, tol) -> _Lane:
     )(lane.corridor, sl, pinned, m)
     n_taken = jnp.sum(taken, axis=-1, dtype=jnp.int32)
     new, new_n, fits = jax.vmap(lambda *x: _apply_flips(mesh, *x))(
-        lane.corridor, lane.n, taken, v, a, b, p0, d, count
+        lane.corridor, live_n, taken, v, a, b, p0, d, count
     )
     new, new_n = _clean(mesh, new, new_n, s, t)
     good = sl.valid & fun_ok & (lane.n >= 1)  # (an empty corridor is no path)
@@ -607,7 +619,9 @@ def _refine(
     run as long as the slowest. Above `POOL_MIN` starts, a pool of W = T/4 worker
     lanes runs them instead: a worker whose start has converged (or failed) writes
     its result and takes the next start, so the loop costs about the mean number of
-    rounds, T/W times, plus one slowest start."""
+    rounds, T/W times, plus one slowest start. That slowest start is then run
+    by a narrower loop: once the queue is empty and at most W/`POOL_SHRINK`
+    workers still run, the running ones move to a loop that wide (and so on)."""
     dtype = mesh.vertices.dtype
     corridor, n = _clean(mesh, corridor, n, s, t)
     tasks = corridor.shape[0]
@@ -627,7 +641,7 @@ def _refine(
         )
         return result(lane)
 
-    workers = max(POOL_MIN, -(-tasks // 4))
+    workers = max(POOL_MIN, -(-tasks // POOL_FRACTION))
     # the queue: the starts to refine, the first of every key first (its others
     # will mostly be settled by the time they are handed out), then the rest,
     # which are already done
@@ -642,7 +656,6 @@ def _refine(
     rank = jnp.where(key >= 0, rank, 0)
     order = jnp.lexsort((rank, status0 >= 0)).astype(jnp.int32)
     live = jnp.sum(status0 < 0, dtype=jnp.int32)
-    results = _fresh(corridor, n, status0, dtype)
 
     def load(task):  # the lanes of tasks (T + 1: none, done)
         idx = jnp.minimum(task, tasks - 1)
@@ -653,12 +666,11 @@ def _refine(
         idx = jnp.minimum(task, tasks - 1)
         return jax.tree.map(lambda x: x[idx], s), jax.tree.map(lambda x: x[idx], t)
 
-    first = jnp.arange(workers, dtype=jnp.int32)
-    task = jnp.where(first < live, order[jnp.minimum(first, tasks - 1)], tasks)
-
-    def cond(state):
-        lane, _, next_, _ = state
-        return jnp.any(~finished(lane)) | (next_ < live)
+    def write(results, lane, task):  # the results of the finished lanes
+        slot = jnp.where(finished(lane) & (task < tasks), task, tasks)
+        return jax.tree.map(
+            lambda r, x: r.at[slot].set(x, mode="drop"), results, result(lane)
+        )
 
     def body(state):
         lane, task, next_, results = state
@@ -669,10 +681,7 @@ def _refine(
         lane = _settle(lane, key[jnp.minimum(task, tasks - 1)], n_keys, earlier)
         out = finished(lane)
         # write what finished, then hand out the next starts in worker order
-        slot = jnp.where(out & (task < tasks), task, tasks)
-        results = jax.tree.map(
-            lambda r, x: r.at[slot].set(x, mode="drop"), results, result(lane)
-        )
+        results = write(results, lane, task)
         rank = jnp.cumsum(out) - 1
         pick = next_ + rank
         new_task = jnp.where(pick < live, order[jnp.minimum(pick, tasks - 1)], tasks)
@@ -687,9 +696,33 @@ def _refine(
         )
         return lane, task, next_ + jnp.sum(out, dtype=jnp.int32), results
 
-    init = (load(task), task, jnp.minimum(live, workers), results)
-    _, _, _, results = jax.lax.while_loop(cond, body, init)
-    return results
+    # The pool shrinks as it drains: the slowest starts take three times the
+    # mean number of rounds, and a loop over all W workers while a few of them
+    # run spends most rounds on finished lanes (a batch of 256 on the 20k
+    # catenoid: 36 % of 96 rounds of 512 workers were live). Once the queue is
+    # empty and at most W/8 workers run, they move to a loop of W/8 lanes.
+    widths = [workers]
+    while widths[-1] // POOL_SHRINK >= POOL_SHRINK:
+        widths.append(widths[-1] // POOL_SHRINK)
+    first = jnp.arange(workers, dtype=jnp.int32)
+    task = jnp.where(first < live, order[jnp.minimum(first, tasks - 1)], tasks)
+    results = _fresh(corridor, n, status0, dtype)
+    state = (load(task), task, jnp.minimum(live, workers), results)
+    for smaller in widths[1:] + [0]:
+
+        def cond(state, smaller=smaller):
+            lane, _, next_, _ = state
+            running = jnp.sum(~finished(lane))
+            return (running > smaller) | (next_ < live)
+
+        lane, task, next_, results = jax.lax.while_loop(cond, body, state)
+        if smaller:  # keep the running lanes (finished ones: written, or none)
+            results = write(results, lane, task)
+            keep = jnp.argsort(finished(lane), stable=True)[:smaller]
+            lane, task = jax.tree.map(lambda x, k=keep: x[k], (lane, task))
+            task = jnp.where(finished(lane), tasks, task)
+        state = (lane, task, next_, results)
+    return state[3]
 
 
 def _start(mesh, angles, slot, slot_ok, vs, vt, s, t, cap):

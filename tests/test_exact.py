@@ -154,7 +154,8 @@ def test_jit_vmap_matches_single_calls():
 @pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
 def test_worker_pool_refines_every_start_as_one_lane_would(monkeypatch):
     """Above `exact.POOL_MIN` starts, a pool of workers refines them one after the
-    other (`exact._refine`). Each start's rounds are the same arithmetic as in a
+    other (`exact._refine`), in fewer workers as its queue drains
+    (`exact.POOL_SHRINK`). Each start's rounds are the same arithmetic as in a
     lane of its own: the same rounds, flips and status per start, lengths equal to
     rounding (1e-12: the vectorised width differs)."""
     from jaxgeo import exact
@@ -176,16 +177,20 @@ def test_worker_pool_refines_every_start_as_one_lane_would(monkeypatch):
             )
         )(corridor, n, status0, s, t)
 
+    monkeypatch.setattr(exact, "POOL_MIN", 64)
     lanes = refine()  # 40 starts ≤ POOL_MIN: one lane each
     monkeypatch.setattr(exact, "POOL_MIN", 4)
     pooled = refine()  # 40 starts on 10 workers
+    monkeypatch.setattr(exact, "POOL_SHRINK", 2)
+    shrunk = refine()  # on 10, then 5, then 2 workers as the queue drains
     ok = np.asarray(lanes.status) == 0
     assert ok.mean() >= 0.9 and np.asarray(lanes.iterations).max() >= 3
-    for name in ("status", "iterations", "flips", "n", "m"):
-        assert np.array_equal(getattr(pooled, name), getattr(lanes, name)), name
-    np.testing.assert_allclose(
-        np.asarray(pooled.length)[ok], np.asarray(lanes.length)[ok], rtol=1e-12
-    )
+    for result in (pooled, shrunk):
+        for name in ("status", "iterations", "flips", "n", "m"):
+            assert np.array_equal(getattr(result, name), getattr(lanes, name)), name
+        np.testing.assert_allclose(
+            np.asarray(result.length)[ok], np.asarray(lanes.length)[ok], rtol=1e-12
+        )
 
 
 @pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
