@@ -35,9 +35,9 @@ class Exact(eqx.Module):
     (anticlastic membranes) the detours are skipped and a start stops once
     another of its class has converged, exactly (`jaxgeo.exact`, "Certificate").
     Length and points differentiable.
-    `max_starts=4` is ~1.5x faster per single path (~1.7x per path of a batch), and
-    `walls=False, detour_rounds=1` ~1.8x more; both miss the shortest path more
-    often on scanned meshes (`docs/accuracy.md`).
+    `max_starts=4` is ~1.4x faster per single path on a scan (`bone.ply`, README),
+    and `walls=False, detour_rounds=1` ~1.8x more; both miss the shortest path
+    more often on scanned meshes (`docs/accuracy.md`).
     The default method. `corridor_capacity`: faces a corridor may hold (None:
     `max_points`; `shortest_path` then tries 256 first, `shortest_paths` 256
     and 512, see `first_attempts`)."""
