@@ -616,11 +616,12 @@ def _refine(
 
     Starts converge in very different numbers of rounds (on random pairs of the
     20k catenoid 25 on average, up to 62): a loop over all T lanes at once would
-    run as long as the slowest. Above `POOL_MIN` starts, a pool of W = T/4 worker
-    lanes runs them instead: a worker whose start has converged (or failed) writes
-    its result and takes the next start, so the loop costs about the mean number of
-    rounds, T/W times, plus one slowest start. That slowest start is then run
-    by a narrower loop: once the queue is empty and at most W/`POOL_SHRINK`
+    run as long as the slowest. Above `POOL_MIN` starts, a pool of
+    W = T/`POOL_FRACTION` worker lanes (at least `POOL_MIN`) runs them instead:
+    a worker whose start has converged (or failed) writes its result and takes
+    the next start, so the loop costs about the mean number of rounds, T/W
+    times, plus one slowest start. That slowest start is then run by a
+    narrower loop: once the queue is empty and at most W/`POOL_SHRINK`
     workers still run, the running ones move to a loop that wide (and so on)."""
     dtype = mesh.vertices.dtype
     corridor, n = _clean(mesh, corridor, n, s, t)
@@ -696,11 +697,10 @@ def _refine(
         )
         return lane, task, next_ + jnp.sum(out, dtype=jnp.int32), results
 
-    # The pool shrinks as it drains: the slowest starts take three times the
-    # mean number of rounds, and a loop over all W workers while a few of them
-    # run spends most rounds on finished lanes (a batch of 256 on the 20k
-    # catenoid: 36 % of 96 rounds of 512 workers were live). Once the queue is
-    # empty and at most W/8 workers run, they move to a loop of W/8 lanes.
+    # The loops of a narrowing pool, W, W/POOL_SHRINK, …: the slowest starts
+    # take three times the mean number of rounds, and one loop over all W
+    # workers spends its last rounds on finished lanes (a batch of 256 on the
+    # 20k catenoid: 36 % of 96 rounds of 512 workers were live)
     widths = [workers]
     while widths[-1] // POOL_SHRINK >= POOL_SHRINK:
         widths.append(widths[-1] // POOL_SHRINK)
