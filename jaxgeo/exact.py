@@ -1075,9 +1075,14 @@ def exact_solve(
 
 def _shortest(lanes: _Lane, mask: Bool[Array, "P L"] | bool = True):
     """Per pair (axis 0), the shortest successful lane (axis 1) among `mask`, and
-    whether any succeeded."""
+    whether any succeeded. Lengths equal to rounding (`_seen`) are a tie, which
+    the first such lane wins: two equally short paths (a symmetric mesh) are
+    told apart by lane order, not by the last bits of a sum, which differ with
+    the width of the loop that refined them (a pair alone or in a batch)."""
     good = (lanes.status == Status.SUCCESS) & mask
-    best = jnp.argmin(jnp.where(good, lanes.length, jnp.inf), axis=1)
+    length = jnp.where(good, lanes.length, jnp.inf)
+    least = jnp.min(length, axis=1, keepdims=True)
+    best = jnp.argmax(good & _seen(length, least[..., None]), axis=1)
     rows = jnp.arange(good.shape[0])
     return jax.tree.map(lambda x: x[rows, best], lanes), jnp.any(good, axis=1)
 
