@@ -245,23 +245,32 @@ def _clean(mesh: Mesh, corridor, n, s: _End, t: _End):
     holds the end."""
     cap = corridor.shape[-1]
 
+    # (the counters k, top and n in one vector: each array the loop updates
+    # costs an operation per step, see `_sleeve.funnel`)
     def cond(st):
-        return st[0] < st[4]
+        return st[0][0] < st[0][2]
 
     def body(st, active):
-        k, stack, top, cor, n = st
+        c, stack, cor = st
+        k, top = c[0], c[1]
         f = cor[jnp.minimum(k, cap - 1)]
         pop = (top >= 2) & (stack[jnp.maximum(top - 2, 0)] == f)
         push = active & ~pop
         stack = stack.at[jnp.where(push, top, cap)].set(f, mode="drop")
-        top = jnp.where(active, jnp.where(pop, top - 1, top + 1), top)
-        return k + active, stack, top, cor, n
+        top = jnp.where(pop, top - 1, top + 1)
+        return jnp.where(active, jnp.stack([k + 1, top, c[2]]), c), stack, cor
 
     lanes = n.shape[0]
     zero = jnp.zeros(lanes, jnp.int32)
-    init = (zero, jnp.full((lanes, cap), -1, jnp.int32), zero, corridor, n)
-    _, stack, top, _, _ = _sleeve.lane_loop(cond, body, init)
-    return jax.vmap(lambda st, m, s_, t_: _trim(mesh, st, m, s_, t_))(stack, top, s, t)
+    init = (
+        jnp.stack([zero, zero, n.astype(jnp.int32)], axis=1),
+        jnp.full((lanes, cap), -1, jnp.int32),
+        corridor,
+    )
+    c, stack, _ = _sleeve.lane_loop(cond, body, init)
+    return jax.vmap(lambda st, m, s_, t_: _trim(mesh, st, m, s_, t_))(
+        stack, c[:, 1], s, t
+    )
 
 
 def _trim(mesh: Mesh, stack, n, s: _End, t: _End):
