@@ -8,9 +8,22 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 
+def dot(a: Float[Array, "... D"], b: Float[Array, "... D"]) -> Float[Array, "..."]:
+    """The sum of `a * b` over the last axis, written out term by term (for
+    the small D of points and vectors): on XLA's CPU backend a reduction over
+    an axis of 2 or 3 becomes a library call of its own (~30 µs for 8 × 256
+    rows of an unfolding), where the written-out sum fuses with its neighbours."""
+    p = a * b
+    total = p[..., 0]
+    for i in range(1, p.shape[-1]):
+        total = total + p[..., i]
+    return total
+
+
 def safe_norm(x: Float[Array, "..."], axis: int = -1) -> Float[Array, "..."]:
     """Euclidean norm whose gradient is 0 (not NaN) at x = 0."""
-    sq = jnp.sum(x * x, axis=axis)
+    last = axis in (-1, x.ndim - 1) and x.shape[-1] <= 4
+    sq = dot(x, x) if last else jnp.sum(x * x, axis=axis)
     positive = sq > 0
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
 

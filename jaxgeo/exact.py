@@ -64,7 +64,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from . import _sleeve
-from ._numerics import corner_angles, last_at_or_before, run_of, safe_norm
+from ._numerics import corner_angles, dot, last_at_or_before, run_of, safe_norm
 from ._starts import best_slots, corridor_from_nodes, face_fan_position, node_path
 from .locate import SurfacePoint, snap
 from .mesh import Mesh
@@ -299,7 +299,7 @@ def _flips(mesh: Mesh, theta, corridor, sleeve, pinned, m, tol):
     prev = xy[jnp.maximum(q - 1, 0)]
     nxt = xy[jnp.minimum(q + 1, pinned.shape[0] - 1)]
     d_in, d_out = xy - prev, nxt - xy
-    tau = jnp.arctan2(_sleeve.cross2d(d_in, d_out), jnp.sum(d_in * d_out, -1))
+    tau = jnp.arctan2(_sleeve.cross2d(d_in, d_out), dot(d_in, d_out))
     is_left = sleeve.inst_is_left[inst]
     beta = jnp.pi + jnp.where(is_left, tau, -tau)
     # the string bends round the wall, so the angle on the corridor's side is at
@@ -373,9 +373,7 @@ def _detours(mesh: Mesh, theta, corridor, n, pinned, m, s, t, k: int, tol):
     p, q = xy[j], xy[j + 1]
     w = sl.inst_xy - p
     seg = q - p
-    u = jnp.clip(
-        jnp.sum(w * seg, -1) / jnp.maximum(jnp.sum(seg * seg, -1), 1e-300), 0, 1
-    )
+    u = jnp.clip(dot(w, seg) / jnp.maximum(dot(seg, seg), 1e-300), 0, 1)
     dist = safe_norm(w - u[:, None] * seg)
     pinned_here = (
         jnp.zeros(cap + 1, bool)
