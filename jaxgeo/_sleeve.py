@@ -272,7 +272,8 @@ def funnel(
     deque slot as x, y and id in one row): every array the loop updates costs
     the CPU runtime an operation per step, and the steps are dependent, so the
     count of operations, not their arithmetic, sets the time (packed: 14
-    operations a step instead of 32, 1.8–2.4× faster at 1–4 lanes)."""
+    operations a step instead of 32, 1.8–2.4× faster at 1–4 lanes). The ids
+    (at most C + 1) ride in the float rows, exact in float32 below 2^24."""
     cap = sleeves.left.shape[-1]
     size = 2 * cap + 3  # a chain grows by at most one slot per point, either way
     mid = cap + 1  # the apex's first slot
