@@ -333,15 +333,17 @@ def funnel(
         )
 
     left0, right0 = sleeves.left_inst[:, 0], sleeves.right_inst[:, 0]
-    lxy, rxy = jax.vmap(portal_xy)(sleeves)
 
     def slot_row(xy, inst):
         return jnp.concatenate([xy, inst.astype(dtype)[:, None]], axis=1)
 
+    def at(inst):  # the lanes' positions of one instance each
+        return jnp.take_along_axis(sleeves.inst_xy, inst[:, None, None], axis=1)[:, 0]
+
     deque = jnp.zeros((lanes, size, 3), dtype).at[:, :, 2].set(END)
-    deque = deque.at[:, mid - 1].set(slot_row(lxy[:, 0], left0))
+    deque = deque.at[:, mid - 1].set(slot_row(at(left0), left0))
     deque = deque.at[:, mid].set(slot_row(sleeves.start_xy, jnp.full(lanes, START)))
-    deque = deque.at[:, mid + 1].set(slot_row(rxy[:, 0], right0))
+    deque = deque.at[:, mid + 1].set(slot_row(at(right0), right0))
     out = jnp.full((lanes, cap + 2), END, jnp.int32).at[:, 0].set(START)
     zero = jnp.zeros(lanes, jnp.int32)
     counters = jnp.stack(
