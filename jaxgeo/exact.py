@@ -528,8 +528,14 @@ WINDINGS = 4
 #: others mostly need not run at all, and elsewhere 4 lanes at a time cost little
 #: more per start than 8 (25 random pairs, CPU per path: 20k catenoid 39 -> 27 ms,
 #: `bone.ply` 48 -> 43, `airplane.obj` 100 -> 84; lengths equal to 4e-16).
+#: A batch runs on one worker per 8 starts: where a pair's starts share a class
+#: (no cone vertex), its first converged start settles the others, and fewer,
+#: busier workers do the same work in fewer lane-steps (batches of 256 random
+#: pairs, CPU: 20k catenoid 67 -> 99–105 paths/s, compile 76 -> 52–57 s; with
+#: cone vertices, where every start runs, `bone.ply` 43.5 -> 38.5 and
+#: `airplane.obj` 12.8 -> 12.1; 16 starts per worker: catenoid 67; lengths equal).
 POOL_MIN = 4
-POOL_FRACTION = 4
+POOL_FRACTION = 8
 
 #: The pool's width shrinks by this factor once its queue is empty and at most
 #: that many workers still run (`_refine`).
