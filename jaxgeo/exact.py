@@ -243,34 +243,44 @@ def _clean(mesh: Mesh, corridor, n, s: _End, t: _End):
     """For a lane batch: remove backtracks (f, g, f → f), then trim each corridor
     to the last leading face that holds the start and the first trailing face that
     holds the end."""
+    corridor, n = _unbacktrack(corridor, n)
+    return jax.vmap(lambda c, m, s_, t_: _trim(mesh, c, m, s_, t_))(corridor, n, s, t)
+
+
+def _unbacktrack(corridor: Int[Array, "L C"], n: Int[Array, " L"]):
+    """Remove backtracks f, g, f → f from a lane batch of corridors, in passes of
+    all at once. Each f, g, f crosses one edge twice: removing such pairs is the
+    free reduction of the corridor's word of edges, whose result does not depend
+    on the order (f, g, f, g, f → f either way), so every pass removes all that
+    do not overlap (every other one of a run). A pass is a few array operations
+    and there are as many as backtracks nest (a stack over the faces cost an
+    operation per face: a fifth of a single path's time on the 20k catenoid)."""
     cap = corridor.shape[-1]
+    k = jnp.arange(cap)
 
-    # (the counters k, top and n in one vector: each array the loop updates
-    # costs an operation per step, see `_sleeve.funnel`)
+    def one_pass(c, m):
+        prev = c[jnp.maximum(k - 1, 0)]
+        nxt = c[jnp.minimum(k + 1, cap - 1)]
+        at = (k >= 1) & (k + 1 < m) & (prev == nxt)  # c[k], c[k + 1] can go
+        run_start = jax.lax.cummax(jnp.where(at, -1, k)) + 1
+        pick = at & ((k - run_start) % 2 == 0)
+        drop = pick | jnp.concatenate([jnp.zeros(1, bool), pick[:-1]])
+        keep = ~drop & (k < m)
+        to = jnp.where(keep, jnp.cumsum(keep, dtype=jnp.int32) - 1, cap)
+        out = jnp.full(cap, -1, c.dtype).at[to].set(c, mode="drop")
+        return out, jnp.sum(keep, dtype=jnp.int32), jnp.any(pick)
+
     def cond(st):
-        return st[0][0] < st[0][2]
+        return jnp.any(st[2])
 
-    def body(st, active):
-        c, stack, cor = st
-        k, top = c[0], c[1]
-        f = cor[jnp.minimum(k, cap - 1)]
-        pop = (top >= 2) & (stack[jnp.maximum(top - 2, 0)] == f)
-        push = active & ~pop
-        stack = stack.at[jnp.where(push, top, cap)].set(f, mode="drop")
-        top = jnp.where(pop, top - 1, top + 1)
-        return jnp.where(active, jnp.stack([k + 1, top, c[2]]), c), stack, cor
+    def body(st):
+        c, m, _ = st
+        return jax.vmap(one_pass)(c, m)
 
     lanes = n.shape[0]
-    zero = jnp.zeros(lanes, jnp.int32)
-    init = (
-        jnp.stack([zero, zero, n.astype(jnp.int32)], axis=1),
-        jnp.full((lanes, cap), -1, jnp.int32),
-        corridor,
-    )
-    c, stack, _ = _sleeve.lane_loop(cond, body, init)
-    return jax.vmap(lambda st, m, s_, t_: _trim(mesh, st, m, s_, t_))(
-        stack, c[:, 1], s, t
-    )
+    init = (corridor, n.astype(jnp.int32), jnp.ones(lanes, bool))
+    corridor, n, _ = jax.lax.while_loop(cond, body, init)
+    return corridor, n
 
 
 def _trim(mesh: Mesh, stack, n, s: _End, t: _End):
