@@ -253,8 +253,8 @@ def _unbacktrack(corridor: Int[Array, "L C"], n: Int[Array, " L"]):
     free reduction of the corridor's word of edges, whose result does not depend
     on the order (f, g, f, g, f → f either way), so every pass removes all that
     do not overlap (every other one of a run). A pass is a few array operations
-    and there are as many as backtracks nest (a stack over the faces cost an
-    operation per face: a fifth of a single path's time on the 20k catenoid)."""
+    and there are as many as backtracks nest, 0–2 a round (a stack over the
+    faces took a loop step per face: 5.5 against 1.5 ms at 256 lanes)."""
     cap = corridor.shape[-1]
     k = jnp.arange(cap)
 
