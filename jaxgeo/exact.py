@@ -283,12 +283,12 @@ def _unbacktrack(corridor: Int[Array, "L C"], n: Int[Array, " L"]):
     return corridor, n
 
 
-def _trim(mesh: Mesh, stack, n, s: _End, t: _End):
-    cap = stack.shape[0]
+def _trim(mesh: Mesh, corridor, n, s: _End, t: _End):
+    cap = corridor.shape[0]
     k = jnp.arange(cap)
     live = k < n
-    hold_s = _contains(mesh, s, stack) & live
-    hold_t = _contains(mesh, t, stack) & live
+    hold_s = _contains(mesh, s, corridor) & live
+    hold_t = _contains(mesh, t, corridor) & live
     first_out = jnp.argmin(jnp.concatenate([hold_s, jnp.array([False])]))
     r = jnp.maximum(first_out - 1, 0)
     rev = hold_t[::-1] | (k[::-1] >= n)  # trailing faces (dead slots count as in)
@@ -296,7 +296,7 @@ def _trim(mesh: Mesh, stack, n, s: _End, t: _End):
     e = jnp.minimum(cap - tail, n - 1)
     e = jnp.where(hold_t[jnp.clip(e, 0, cap - 1)], e, n - 1)
     new_n = e - r + 1
-    out = jnp.where(k < new_n, stack[jnp.clip(k + r, 0, cap - 1)], -1)
+    out = jnp.where(k < new_n, corridor[jnp.clip(k + r, 0, cap - 1)], -1)
     return out, new_n.astype(jnp.int32)
 
 
@@ -555,8 +555,9 @@ POOL_SHRINK = 8
 def _round(mesh, theta, lane: _Lane, s, t, tol) -> _Lane:
     """One flip round of every lane: unfold, pull the string, flip, clean."""
     active = ~lane.done
-    # a finished lane is unfolded as an empty corridor, so that the funnel's and
-    # `_clean`'s loops, which run as long as their longest lane, skip it
+    # a finished lane is unfolded as an empty corridor, so that the funnel's
+    # loop, which runs as long as its longest lane, and `_unbacktrack`'s passes,
+    # which run while any lane has a backtrack, skip it
     live_n = jnp.where(active, lane.n, 0)
     sl = jax.vmap(lambda c, m, s_, t_: _sleeve_of(mesh, c, m, s_, t_))(
         lane.corridor, live_n, s, t
