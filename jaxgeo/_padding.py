@@ -19,19 +19,20 @@ with every mesh of the same `SizeClass`:
 
 The padding is inert. Padded vertices sit at the centre of the mesh's bounding box
 (inside it: the trace's frame is unchanged) in no face's fan (`fan_size` 0,
-`vertex_faces` −1, so off the boundary: `boundary_next` −1), landmark distance inf and
-predecessor −1; padded edges' predecessor −1), so no start or path reaches them.
+`vertex_faces` −1, so off the boundary: `boundary_next` −1), landmark distance inf
+and predecessor −1; padded edges' predecessor −1), so no start or path reaches them.
 Padded faces are the point-like triangle (V, V, V) of the first padded vertex, with
-`face_component` −1 (`locate` skips them) and `face_edges` the first padded edge;
-padded edges are (V, V) with `edge_faces` (−1, −1) (the laser's `candidates="all"`
-skips them; real edges always have a face). Real elements keep their indices, so paths
-on the padded mesh name the same faces, edges and vertices as on the real one. `jnp`
-padding of the vertices is differentiable: gradients flow back to the real rows (the
-padded rows' value is a `stop_gradient`).
+`face_component` −1 (`locate` skips them), `corner_angles` 0 and `face_edges` the
+first padded edge; padded edges are (V, V) with `edge_faces` (−1, −1) (the laser's
+`candidates="all"` skips them; real edges always have a face). Real elements keep
+their indices, so paths on the padded mesh name the same faces, edges and vertices
+as on the real one. `jnp` padding of the vertices is differentiable: gradients flow
+back to the real rows (the padded rows' value is a `stop_gradient`).
 
-The padded topology of a concrete mesh is built once, in numpy, and cached while
-its arrays live (`Mesh.with_vertices` shares it); a traced mesh (inside the
-user's `jax.jit`) is padded with `jnp` as part of the trace.
+The padded topology of a concrete mesh is built once, in numpy, and cached while its
+arrays live (`Mesh.with_vertices` shares it); a traced mesh (inside the user's
+`jax.jit`) is padded with `jnp` as part of the trace. The fields that follow the
+vertices (`GEOMETRY`) are padded and cached with them.
 """
 
 from __future__ import annotations
@@ -114,6 +115,7 @@ RULES: dict[str, tuple[tuple[str | None, ...], Any]] = {
     "landmark_pred_edge": ((None, "E"), -1),
     "landmark_dist": ((None, "V"), np.inf),
     "edge_cut": (("E",), 0),
+    "corner_angles": (("F", None), 0.0),
 }
 
 
@@ -147,24 +149,28 @@ def _pad_vertices(v, n: int):
     return jnp.asarray(np.concatenate([a, np.broadcast_to(centre, (n, 3))]))
 
 
-def _pad_topology(mesh: Mesh, c: SizeClass) -> dict[str, Any]:
+#: The fields that follow the vertex positions (`Mesh.with_vertices` replaces
+#: them), padded and cached with the vertices rather than with the topology.
+GEOMETRY = ("vertices", "corner_angles")
+
+
+def _pad_topology(mesh: Mesh, c: SizeClass, names=None) -> dict[str, Any]:
     real = {"V": mesh.vertices.shape[0], "E": mesh.edges.shape[0]}
     size = {"V": c.vertices, "F": c.faces, "E": c.edges, "K": c.fan, "K1": c.fan + 1}
-    return {
-        f.name: _pad_field(f.name, getattr(mesh, f.name), real, size)
-        for f in dataclasses.fields(mesh)
-        if f.name != "vertices"
-    }
+    if names is None:
+        names = [f.name for f in dataclasses.fields(mesh) if f.name not in GEOMETRY]
+    return {k: _pad_field(k, getattr(mesh, k), real, size) for k in names}
 
 
 #: Padded topology per concrete mesh, by the identity of its `faces` array:
 #: `(weakrefs to the real topology arrays, padded fields, (weakref to the real
-#: vertices, padded vertices) or None)`; dropped when `faces` is collected.
+#: vertices, padded `GEOMETRY` fields) or None)`; dropped when `faces` is
+#: collected.
 _CACHE: dict[int, tuple[dict[str, weakref.ref], dict[str, Any], Any]] = {}
 
 
 def _cached_topology(mesh: Mesh, c: SizeClass) -> dict[str, Any]:
-    names = [f.name for f in dataclasses.fields(mesh) if f.name != "vertices"]
+    names = [f.name for f in dataclasses.fields(mesh) if f.name not in GEOMETRY]
     key = id(mesh.faces)
     hit = _CACHE.get(key)
     if hit is not None and all(hit[0][k]() is getattr(mesh, k) for k in names):
@@ -193,22 +199,29 @@ def padded(mesh: Mesh) -> Mesh:
         raise AssertionError(f"no padding rule for Mesh field(s) {sorted(unknown)}")
     c = class_of(mesh)
     leaves = [getattr(mesh, f.name) for f in dataclasses.fields(mesh)]
-    if any(_is_traced(x) for x in leaves if x is not mesh.vertices):
+    geometry = [getattr(mesh, k) for k in GEOMETRY]
+    if any(_is_traced(x) for x in leaves if not any(x is g for g in geometry)):
         fields = _pad_topology(mesh, c)
     else:
         fields = _cached_topology(mesh, c)
     v = mesh.vertices
-    n = c.vertices - v.shape[0]
     entry = None if _is_traced(v) else _CACHE.get(id(mesh.faces))
     if entry is not None and entry[2] is not None and entry[2][0]() is v:
-        pv = entry[2][1]
+        padded_geometry = entry[2][1]
     else:
-        pv = _pad_vertices(v, n)
+        padded_geometry = _pad_topology(mesh, c, GEOMETRY[1:])
+        padded_geometry["vertices"] = _pad_vertices(v, c.vertices - v.shape[0])
         # under an outer jit a concrete mesh is padded inside the trace: the
         # result is then a tracer of that trace and must not outlive it
-        if entry is not None and not _is_traced(pv):
-            _CACHE[id(mesh.faces)] = (entry[0], entry[1], (weakref.ref(v), pv))
-    fields["vertices"] = pv
+        if entry is not None and not any(
+            _is_traced(x) for x in padded_geometry.values()
+        ):
+            _CACHE[id(mesh.faces)] = (
+                entry[0],
+                entry[1],
+                (weakref.ref(v), padded_geometry),
+            )
+    fields.update(padded_geometry)
     names = [f.name for f in dataclasses.fields(mesh)]
     flat, treedef = jax.tree.flatten(mesh)
     if len(flat) != len(names) or any(

@@ -887,7 +887,7 @@ def exact_solve(
     sg = jax.lax.stop_gradient
     smesh = sg(mesh)
     ss, ts = sg(s), sg(t)
-    angles = corner_angles(smesh.vertices, smesh.faces)
+    angles = smesh.corner_angles  # (computed with the mesh)
     theta = _angle_sums(smesh.vertices, smesh.faces, angles)
 
     def graph_vertex(e: _End):

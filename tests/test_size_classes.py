@@ -15,6 +15,7 @@ import pytest
 import trimesh
 
 import jaxgeo as jg
+from jaxgeo._numerics import corner_angles
 from jaxgeo._padding import RULES, SizeClass, size_class
 from jaxgeo.batch import _solve_chunk
 from jaxgeo.geodesic import _solve_one
@@ -89,6 +90,16 @@ def test_padded_layout(make):
     assert q.faces is p.faces and q.landmark_pred_edge is p.landmark_pred_edge
     assert mesh.padded().vertices is mesh.padded().vertices  # the last one cached
     np.testing.assert_array_equal(np.asarray(q.vertices)[:n_v], 2 * v)
+    # but not the geometry that follows the vertices: the corner angles of new
+    # positions (a shear changes them) are recomputed, and padded with them
+    sheared = v + np.outer(v[:, 0], [0.0, 0.0, 1.0])
+    r = mesh.with_vertices(sheared).padded()
+    np.testing.assert_allclose(
+        np.asarray(r.corner_angles)[:n_f],
+        np.asarray(corner_angles(sheared, mesh.faces)),
+        rtol=1e-12,
+    )
+    assert not np.allclose(np.asarray(r.corner_angles), np.asarray(p.corner_angles))
 
 
 @pytest.mark.parametrize("make", [holed_plate, lambda: unit_icosphere(3)])
