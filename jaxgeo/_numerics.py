@@ -66,3 +66,19 @@ def corner_angles(
     cos = jnp.clip(jnp.sum(e1 * e2, -1), -1.0, 1.0)
     sin = safe_norm(jnp.cross(e1, e2))  # finite gradient even at sin = 0
     return jnp.arctan2(sin, cos)  # (F, 3)
+
+
+def corner_angles_host(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """`corner_angles` in numpy, in float64 (for what a `Mesh` computes once:
+    eager JAX would compile each operation for every new mesh size, ~1 s)."""
+    p = np.asarray(vertices, np.float64)[np.asarray(faces)]  # (F, 3, 3)
+
+    def normalized(x):
+        n = np.linalg.norm(x, axis=-1, keepdims=True)
+        return x / np.where(n > 0, n, 1.0)
+
+    e1 = normalized(np.roll(p, -1, axis=1) - p)
+    e2 = normalized(np.roll(p, 1, axis=1) - p)
+    cos = np.clip(np.sum(e1 * e2, -1), -1.0, 1.0)
+    sin = np.linalg.norm(np.cross(e1, e2), axis=-1)
+    return np.arctan2(sin, cos)  # (F, 3)

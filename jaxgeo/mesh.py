@@ -14,6 +14,8 @@ import warnings
 from typing import Any
 
 import equinox as eqx
+import jax
+import jax.core
 import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
@@ -36,7 +38,7 @@ from ._mesh_checks import (
     fail,
     unique_pairs,
 )
-from ._numerics import corner_angles
+from ._numerics import corner_angles, corner_angles_host
 from ._padding import SizeClass, class_of, padded
 from ._precision import warn_if_x64_disabled
 from ._stacklevel import caller_stacklevel
@@ -255,7 +257,7 @@ class Mesh(eqx.Module):
             annulus_cuts(v, f, edges, edge_faces, component, vertex_component),
             jnp.int32,
         )
-        self.corner_angles = corner_angles(self.vertices, self.faces)
+        self.corner_angles = jnp.asarray(corner_angles_host(v, f), v.dtype)
 
     @property
     def n_vertices(self) -> int:
@@ -309,10 +311,14 @@ class Mesh(eqx.Module):
                 f"got {jnp.shape(vertices)}"
             )
         vertices = jnp.asarray(vertices)
-        if jnp.issubdtype(vertices.dtype, jnp.floating):
-            angles = corner_angles(vertices, self.faces)
-        else:  # (refused where the mesh is used: `_checks.check_mesh_vertices`)
+        if not jnp.issubdtype(vertices.dtype, jnp.floating):
+            # (refused where the mesh is used: `_checks.check_mesh_vertices`)
             angles = jnp.full_like(self.corner_angles, jnp.nan)
+        elif isinstance(vertices, jax.core.Tracer):
+            angles = corner_angles(vertices, self.faces)
+        else:
+            host = corner_angles_host(np.asarray(vertices), np.asarray(self.faces))
+            angles = jnp.asarray(host, vertices.dtype)
         return eqx.tree_at(
             lambda m: (m.vertices, m.corner_angles), self, (vertices, angles)
         )
