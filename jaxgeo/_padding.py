@@ -154,11 +154,15 @@ def _pad_vertices(v, n: int):
 GEOMETRY = ("vertices", "corner_angles")
 
 
-def _pad_topology(mesh: Mesh, c: SizeClass, names=None) -> dict[str, Any]:
+def _topology_names(mesh: Mesh) -> list[str]:
+    """The fields of `mesh` that do not follow the vertices."""
+    return [f.name for f in dataclasses.fields(mesh) if f.name not in GEOMETRY]
+
+
+def _pad_fields(mesh: Mesh, c: SizeClass, names) -> dict[str, Any]:
+    """The fields `names` of `mesh` padded to class `c` (by `RULES`)."""
     real = {"V": mesh.vertices.shape[0], "E": mesh.edges.shape[0]}
     size = {"V": c.vertices, "F": c.faces, "E": c.edges, "K": c.fan, "K1": c.fan + 1}
-    if names is None:
-        names = [f.name for f in dataclasses.fields(mesh) if f.name not in GEOMETRY]
     return {k: _pad_field(k, getattr(mesh, k), real, size) for k in names}
 
 
@@ -170,12 +174,12 @@ _CACHE: dict[int, tuple[dict[str, weakref.ref], dict[str, Any], Any]] = {}
 
 
 def _cached_topology(mesh: Mesh, c: SizeClass) -> dict[str, Any]:
-    names = [f.name for f in dataclasses.fields(mesh) if f.name not in GEOMETRY]
+    names = _topology_names(mesh)
     key = id(mesh.faces)
     hit = _CACHE.get(key)
     if hit is not None and all(hit[0][k]() is getattr(mesh, k) for k in names):
         return hit[1]
-    fields = _pad_topology(mesh, c)
+    fields = _pad_fields(mesh, c, names)
     if any(_is_traced(x) for x in fields.values()):
         return fields  # padded inside an outer jit's trace: must not outlive it
 
@@ -198,10 +202,9 @@ def padded(mesh: Mesh) -> Mesh:
     if unknown:
         raise AssertionError(f"no padding rule for Mesh field(s) {sorted(unknown)}")
     c = class_of(mesh)
-    leaves = [getattr(mesh, f.name) for f in dataclasses.fields(mesh)]
-    geometry = [getattr(mesh, k) for k in GEOMETRY]
-    if any(_is_traced(x) for x in leaves if not any(x is g for g in geometry)):
-        fields = _pad_topology(mesh, c)
+    topology = _topology_names(mesh)
+    if any(_is_traced(getattr(mesh, k)) for k in topology):
+        fields = _pad_fields(mesh, c, topology)
     else:
         fields = _cached_topology(mesh, c)
     v = mesh.vertices
@@ -209,7 +212,7 @@ def padded(mesh: Mesh) -> Mesh:
     if entry is not None and entry[2] is not None and entry[2][0]() is v:
         padded_geometry = entry[2][1]
     else:
-        padded_geometry = _pad_topology(mesh, c, GEOMETRY[1:])
+        padded_geometry = _pad_fields(mesh, c, GEOMETRY[1:])
         padded_geometry["vertices"] = _pad_vertices(v, c.vertices - v.shape[0])
         # under an outer jit a concrete mesh is padded inside the trace: the
         # result is then a tracer of that trace and must not outlive it
