@@ -4,23 +4,30 @@
     python benchmarks/bench_paths.py          # rewrites its part of RESULTS.md
     python benchmarks/bench_paths.py --quick    # 5k/20k meshes, 200-path batches
 
-The protocol of issue 13: **random vertex pairs drawn uniformly** (not hand-picked
-long ones, where fixed per-call costs hide), on generated surfaces (an icosphere
-and a catenoid at about 5k, 20k and 100k faces, and a 20k-face saddle: a disc
-with no cone vertex, where the exact paths are certified) and on real meshes shipped inside
-pymeshlab's wheel (`bone.ply`, a CT-scanned bone; `airplane.obj`, a CAD model;
-when pymeshlab is installed). Every method of METHODS runs single paths
-(`shortest_path`); the default method and the laser also run a batch of 1,000
-(`shortest_paths`, chunks of 256) on the 20k catenoid, the saddle and `airplane.obj`;
-potpourri3d's `EdgeFlipGeodesicSolver.find_geodesic_path` and pygeodesic's exact
-MMP answer the same pairs in the same process. Times are CPU time
-(`time.process_time`, the fair measure on a shared machine; wall time beside it
-for batches), medians over the pairs after a compile call; "compile+first" is
-the wall time of the first call on the mesh. Ratios come from the same run. It
-also times the batched all-edges System (16) solve against the closed form alone
-on the same edges, and one path on a 1M-face mesh with the process's peak memory.
-It rewrites the part of RESULTS.md above the line `<!-- end bench_paths -->`
-and keeps the rest (other benchmarks' sections).
+The protocol of issue 13: **random vertex pairs drawn uniformly** (not
+hand-picked long ones, where fixed per-call costs hide), on generated surfaces
+(an icosphere and a catenoid at about 5k, 20k and 100k faces, and a 20k-face
+saddle: a disc with no cone vertex, where the exact paths are certified) and on
+real meshes shipped inside pymeshlab's wheel (`bone.ply`, a CT-scanned bone;
+`airplane.obj`, a CAD model; when pymeshlab is installed). Every method of
+METHODS runs single paths (`shortest_path`); the default method and the laser
+also run a batch of 1,000 (`shortest_paths`, chunks of 256) on the 20k catenoid,
+the saddle and `airplane.obj`; potpourri3d's
+`EdgeFlipGeodesicSolver.find_geodesic_path` and pygeodesic's exact MMP answer
+the same pairs in the same process. Times are CPU time (`time.process_time`, the
+fair measure on a shared machine; wall time beside it for batches), medians over
+the pairs after a compile call; "compile+first" is the wall time of the first
+call on the mesh. Ratios come from the same run. It also times the batched
+all-edges System (16) solve against the closed form alone on the same edges, and
+one path on a 1M-face mesh with the process's peak memory. It rewrites the part
+of RESULTS.md above the line `<!-- end bench_paths -->` and keeps the rest
+(other benchmarks' sections).
+
+Linux's default `vm.max_map_count` (65,530) is too small for the compiles of the
+81k icosphere (LLVM dies with "Cannot allocate memory"): raise it first, as
+`.ci/run` does (`sysctl -w vm.max_map_count=262144`). XLA's CPU thread pool
+costs the exact method's single paths a third to a half of their time on this
+machine: `bench_threads.py` measures it.
 """
 
 from __future__ import annotations
