@@ -130,15 +130,9 @@ def main(argv=None) -> int:
             if row:
                 rows.append({"mesh": name, **row})
                 print(rows[-1], file=sys.stderr, flush=True)
-    keys = list(dict.fromkeys(k for r in rows for k in r))
-    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    for r in rows:
-        cells = [
-            f"{r[k]:.3g}" if isinstance(r.get(k), float) else str(r.get(k, ""))
-            for k in keys
-        ]
-        lines.append("| " + " | ".join(cells) + " |")
-    print("\n".join(lines))
+    from bench_paths import markdown  # (imports JAX: not in the children)
+
+    print(markdown(rows))
     return 0
 
 
