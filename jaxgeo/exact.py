@@ -646,9 +646,7 @@ def _refine(
     the next start, so the loop costs about the mean number of rounds, T/W
     times, plus one slowest start. That slowest start is then run by a
     narrower loop: once the queue is empty and at most W/`POOL_SHRINK`
-    workers still run, the running ones move to a loop that wide (and so on).
-    A single pair (T ≤ `POOL_FRACTION`) whose class is known first refines its
-    first start alone, in a loop of one lane."""
+    workers still run, the running ones move to a loop that wide (and so on)."""
     dtype = mesh.vertices.dtype
     corridor, n = _clean(mesh, corridor, n, s, t)
     tasks = corridor.shape[0]
@@ -681,12 +679,10 @@ def _refine(
         .set((jnp.arange(tasks) - first_of_key).astype(jnp.int32))
     )
     rank = jnp.where(key >= 0, rank, 0)
+    order = jnp.lexsort((rank, status0 >= 0)).astype(jnp.int32)
+    live = jnp.sum(status0 < 0, dtype=jnp.int32)
 
-    def queue(status0):  # the live starts in the order they are handed out
-        order = jnp.lexsort((rank, status0 >= 0)).astype(jnp.int32)
-        return order, jnp.sum(status0 < 0, dtype=jnp.int32)
-
-    def load(task, status0):  # the lanes of tasks (T + 1: none, done)
+    def load(task):  # the lanes of tasks (T + 1: none, done)
         idx = jnp.minimum(task, tasks - 1)
         lane = _fresh(corridor[idx], n[idx], status0[idx], dtype)
         return eqx.tree_at(lambda x: x.done, lane, lane.done | (task >= tasks))
@@ -700,33 +696,6 @@ def _refine(
         return jax.tree.map(
             lambda r, x: r.at[slot].set(x, mode="drop"), results, result(lane)
         )
-
-    order, live = queue(status0)
-    results = _fresh(corridor, n, status0, dtype)
-    if tasks <= POOL_FRACTION:
-        # One pair. Where its class is known (no cone vertex), its first start
-        # runs alone: the others of its key would reach the same path, and a
-        # round of one lane costs about half a round of POOL_MIN lanes (20
-        # random pairs, CPU medians: 20k catenoid 14.7 -> 12.0 ms, 12.4 -> 8.1
-        # on one core; compile +2.7 s). The pool runs what is left: other
-        # windings, or every start where there are cone vertices.
-        head = order[:1]
-        runs = (key[head] >= 0) & (status0[head] < 0)
-        lane = load(jnp.where(runs, head, tasks), status0)
-        s_h, t_h = ends(head)
-        lane = jax.lax.while_loop(
-            lambda lane: jnp.any(~finished(lane)),
-            lambda lane: _round(mesh, theta, lane, s_h, t_h, tol),
-            lane,
-        )
-        results = write(results, lane, jnp.where(runs, head, tasks))
-        won = _won(results, key, n_keys)
-        settled = (key >= 0) & won[jnp.maximum(key, 0)]
-        ran = jnp.zeros(tasks, bool).at[head].set(runs)
-        status0 = jnp.where(
-            (settled | ran) & (status0 < 0), Status.REFINE_FAILED, status0
-        )
-        order, live = queue(status0)
 
     def body(state):
         lane, task, next_, results = state
@@ -744,9 +713,7 @@ def _refine(
         task = jnp.where(out, new_task, task)
         # (a start whose key has converged already is settled as it is loaded)
         won = _won(results, key, n_keys)
-        fresh = _settle(
-            load(task, status0), key[jnp.minimum(task, tasks - 1)], n_keys, won
-        )
+        fresh = _settle(load(task), key[jnp.minimum(task, tasks - 1)], n_keys, won)
         lane = jax.tree.map(
             lambda f, x: jnp.where(out.reshape(out.shape + (1,) * (x.ndim - 1)), f, x),
             fresh,
@@ -763,7 +730,8 @@ def _refine(
         widths.append(widths[-1] // POOL_SHRINK)
     first = jnp.arange(workers, dtype=jnp.int32)
     task = jnp.where(first < live, order[jnp.minimum(first, tasks - 1)], tasks)
-    state = (load(task, status0), task, jnp.minimum(live, workers), results)
+    results = _fresh(corridor, n, status0, dtype)
+    state = (load(task), task, jnp.minimum(live, workers), results)
     for smaller in widths[1:] + [0]:
 
         def cond(state, smaller=smaller):
