@@ -43,7 +43,7 @@ def child(mesh_name: str, one_core: bool, queries: int, batch: int) -> dict:
     jax.config.update("jax_enable_x64", True)
     import numpy as np
     from _samples import pymeshlab_sample, referenced
-    from bench_paths import random_pairs
+    from bench_paths import cpu_median, random_pairs
 
     import jaxgeo as jg
     from jaxgeo import surfaces
@@ -81,12 +81,7 @@ def child(mesh_name: str, one_core: bool, queries: int, batch: int) -> dict:
         return row
     solver = pp3d.EdgeFlipGeodesicSolver(v, f)
     solver.find_geodesic_path(*pairs[0])
-    times = []
-    for i, j in pairs:
-        c0 = time.process_time()
-        solver.find_geodesic_path(i, j)
-        times.append(time.process_time() - c0)
-    row["pp3d ms"] = 1e3 * statistics.median(times)
+    row["pp3d ms"] = 1e3 * cpu_median(solver.find_geodesic_path, pairs)
     row["exact/pp3d"] = row["exact ms CPU"] / row["pp3d ms"]
     if batch:  # as bench_paths: a second call, after the compile
         big = random_pairs(len(v), batch, seed=1)
