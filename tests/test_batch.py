@@ -94,6 +94,31 @@ def test_small_batch_does_not_pay_for_the_padding(caplog):
             np.testing.assert_array_equal(have, want)
 
 
+def test_padding_rows_are_empty_paths(monkeypatch):
+    """The rows that pad a chunk to its compiled size end where they start (a
+    path of length zero, one cheap step), not copies of a real row, which may be
+    the slowest path of the chunk. The real rows are passed unchanged."""
+    from jaxgeo import batch
+
+    seen = []
+
+    def spy(mesh, p1, p2, v1, v2, *rest):
+        seen.append(tuple(np.asarray(x) for x in (p1, p2, v1, v2)))
+        return solve_chunk(mesh, p1, p2, v1, v2, *rest)
+
+    solve_chunk = batch._solve_chunk
+    monkeypatch.setattr(batch, "_solve_chunk", spy)
+    p1, p2 = _pairs(7, 0)
+    jg.shortest_paths(MESH, p1, p2, chunk_size=4)  # chunks of 4 and 3 + 1 pad
+    chunks = [c for c in seen if c[0].shape[0] == 4]
+    assert len(chunks) >= 2
+    q1, q2, _, w2 = chunks[1]
+    np.testing.assert_array_equal(q1[:3], p1[4:])
+    np.testing.assert_array_equal(q2[:3], p2[4:])
+    np.testing.assert_array_equal(q2[3], q1[3])  # the padding row: zero length
+    assert w2[3] == -1  # (points, not vertex indices)
+
+
 @pytest.mark.mistyped
 def test_bad_batches_raise():
     p1, p2 = _pairs(3, 2)
