@@ -17,6 +17,7 @@ def _flat_grid(n=4):
     return Mesh(v, grid_faces(n, n))
 
 
+@pytest.mark.slow  # 16 s cold on 2 cores (README tests <= 5 min)
 @pytest.mark.parametrize("offset", [0.3 * SNAP, 3 * SNAP])
 def test_a_seam_near_vertices_is_snapped_onto_them(offset):
     """A straight seam at height 1/4 + offset·h (h = 1/4, the grid's edge)

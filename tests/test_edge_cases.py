@@ -292,6 +292,7 @@ def test_endpoints_on_vertices_edges_and_boundary(start, end):
     np.testing.assert_allclose(path.polyline()[[0, -1]], [a, b], atol=1e-14)
 
 
+@pytest.mark.slow  # 16 s cold on 2 cores (README tests <= 5 min)
 def test_path_along_a_straight_boundary():
     v = V(FLAT)
     path = ok(jg.shortest_path(FLAT, v[vid(0, 0)], v[vid(6, 0)]))

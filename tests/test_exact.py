@@ -222,6 +222,7 @@ def test_gradient_matches_central_differences():
     assert abs(float(fd) - float(gb @ db)) <= 1e-6 * abs(float(fd)) + 1e-9
 
 
+@pytest.mark.slow  # 16 s cold on 2 cores (README tests <= 5 min)
 def test_points_lie_on_their_elements_and_sum_to_the_length():
     mesh = unit_icosphere(2)
     v = np.asarray(mesh.vertices)

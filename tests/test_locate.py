@@ -209,6 +209,7 @@ def test_element_reads_vertex_edge_and_face_points():
     assert int(off.element(MESH)[0]) == FACE
 
 
+@pytest.mark.slow  # 22 + 9 s cold on 2 cores (README tests <= 5 min)
 @pytest.mark.parametrize("method", ["exact", "laser"])
 def test_path_nodes_as_surface_points(method):
     """`Path.surface_points`: every node as a `SurfacePoint` at `points` (past
