@@ -137,10 +137,10 @@ def _set_rows(rows: np.ndarray, x, y):
 
 def _padded(p1, p2, v1, v2, real: int):
     """A chunk's rows `(p1, p2, v1, v2)` whose rows past the first `real` (padding,
-    copies of a real row) end where they start: a path of length zero costs one
-    flip round, where the copy could be the chunk's slowest path (a retried
-    sub-chunk of one long pair padded with 31 copies of it took 3.3 s instead of
-    0.1; 20k catenoid)."""
+    copies of a real row) end where they start: a path of length zero builds no
+    start, where the copy could be the chunk's slowest path (a retried sub-chunk
+    of one long pair padded with 31 copies of it took 3.3 s instead of 0.5; 20k
+    catenoid)."""
     pad = np.arange(p1.shape[0]) >= real
     return p1, jnp.where(pad[:, None], p1, p2), v1, jnp.where(pad, v1, v2)
 
@@ -224,7 +224,7 @@ def shortest_paths(
     pieces = []
     for start in range(0, n, chunk_size):
         stop = min(start + chunk_size, n)
-        idx = np.minimum(np.arange(start, start + chunk_size), n - 1)  # pad with last
+        idx = np.minimum(np.arange(start, start + chunk_size), n - 1)  # then `_padded`
         p1, p2, v1, v2 = _padded(pa[idx], pb[idx], va[idx], vb[idx], stop - start)
         chunk = [
             jnp.asarray(p1, dtype),
