@@ -37,15 +37,11 @@ def main() -> None:
 
     jax.config.update("jax_enable_x64", True)
     if args.mesh in ("catenoid", "saddle"):
-        v, f = getattr(surfaces, args.mesh)(100, 100)
+        mesh = jg.Mesh(*getattr(surfaces, args.mesh)(100, 100))
     else:
-        import trimesh
-        from _samples import pymeshlab_sample
+        from _samples import pymeshlab_sample, referenced
 
-        tm = trimesh.load(pymeshlab_sample(args.mesh), process=False)
-        tm.remove_unreferenced_vertices()
-        v, f = np.asarray(tm.vertices), np.asarray(tm.faces)
-    mesh = jg.Mesh(v, f)
+        mesh = referenced(jg.load_mesh(pymeshlab_sample(args.mesh)))
     pairs = random_pairs(mesh.n_vertices, args.pairs, seed=1)
 
     def run():
