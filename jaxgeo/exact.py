@@ -621,14 +621,18 @@ def _won(lane: _Lane, key, n_keys: int):
     return jnp.zeros(n_keys, bool).at[idx].max(ok, mode="drop")
 
 
+def _of_won_key(key, won: Bool[Array, " K"]):
+    """Whether each start's key (−1: none) is one of the `won` keys (`_won`)."""
+    return (key >= 0) & won[jnp.maximum(key, 0)]
+
+
 def _settle(
     lane: _Lane, key, n_keys: int, won_before: Bool[Array, " K"] | bool = False
 ) -> _Lane:
     """Stop the unfinished lanes whose key (`_refine`) has a converged lane (now
     or, `won_before`, earlier): it is the only locally shortest path of their
     class (`_topology`), which they would reach again."""
-    won = _won(lane, key, n_keys) | won_before
-    stop = (key >= 0) & won[jnp.maximum(key, 0)] & ~lane.done
+    stop = _of_won_key(key, _won(lane, key, n_keys) | won_before) & ~lane.done
     status = jnp.where(stop, Status.REFINE_FAILED, lane.status).astype(jnp.int32)
     return eqx.tree_at(lambda x: (x.done, x.status), lane, (lane.done | stop, status))
 
@@ -1023,8 +1027,7 @@ def exact_solve(
         )
         # a lane that outgrew the capacity matters unless a lane of its key
         # converged: that is the path it would have reached (`_topology`)
-        won = _won(lanes, lane_key, n_keys)
-        moot = (lane_key >= 0) & won[jnp.maximum(lane_key, 0)]
+        moot = _of_won_key(lane_key, _won(lanes, lane_key, n_keys))
         grew = ((lanes.status == Status.MAX_STEPS) & ~moot).reshape(n_pairs, k)
         lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
         ok = jnp.any(lanes.status == Status.SUCCESS, axis=1)

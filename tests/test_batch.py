@@ -96,8 +96,8 @@ def test_small_batch_does_not_pay_for_the_padding(caplog):
 
 def test_padding_rows_are_empty_paths(monkeypatch):
     """The rows that pad a chunk to its compiled size end where they start (a
-    path of length zero, one cheap step), not copies of a real row, which may be
-    the slowest path of the chunk. The real rows are passed unchanged."""
+    path of length zero, which builds no start), not copies of a real row, which
+    may be the slowest path of the chunk. The real rows are passed unchanged."""
     from jaxgeo import batch
 
     seen = []
