@@ -94,29 +94,56 @@ def test_small_batch_does_not_pay_for_the_padding(caplog):
             np.testing.assert_array_equal(have, want)
 
 
-def test_padding_rows_are_empty_paths(monkeypatch):
-    """The rows that pad a chunk to its compiled size end where they start (a
-    path of length zero, which builds no start), not copies of a real row, which
-    may be the slowest path of the chunk. The real rows are passed unchanged."""
+def _spy_on_chunks(monkeypatch) -> list:
+    """The rows (p1, p2, v1, v2) of every chunk `shortest_paths` solves."""
     from jaxgeo import batch
 
     seen = []
+    solve_chunk = batch._solve_chunk
 
     def spy(mesh, p1, p2, v1, v2, *rest):
         seen.append(tuple(np.asarray(x) for x in (p1, p2, v1, v2)))
         return solve_chunk(mesh, p1, p2, v1, v2, *rest)
 
-    solve_chunk = batch._solve_chunk
     monkeypatch.setattr(batch, "_solve_chunk", spy)
+    return seen
+
+
+def _chord(p1, p2):
+    return np.linalg.norm(p2 - p1, axis=-1)
+
+
+def test_padding_rows_are_empty_paths(monkeypatch):
+    """The rows that pad a chunk to its compiled size end where they start (a
+    path of length zero, which builds no start), not copies of a real row, which
+    may be the slowest path of the chunk. The real rows are passed unchanged."""
+    seen = _spy_on_chunks(monkeypatch)
     p1, p2 = _pairs(7, 0)
     jg.shortest_paths(MESH, p1, p2, chunk_size=4)  # chunks of 4 and 3 + 1 pad
     chunks = [c for c in seen if c[0].shape[0] == 4]
     assert len(chunks) >= 2
     q1, q2, _, w2 = chunks[1]
-    np.testing.assert_array_equal(q1[:3], p1[4:])
-    np.testing.assert_array_equal(q2[:3], p2[4:])
+    last = np.argsort(_chord(p1, p2), kind="stable")[4:]  # (rows by chord)
+    np.testing.assert_array_equal(q1[:3], p1[last])
+    np.testing.assert_array_equal(q2[:3], p2[last])
     np.testing.assert_array_equal(q2[3], q1[3])  # the padding row: zero length
     assert w2[3] == -1  # (points, not vertex indices)
+
+
+def test_rows_are_solved_by_chord_and_returned_as_given(monkeypatch):
+    """Chunks get the pairs in the order of their chord (pairs of like length
+    together: a shorter tail for each chunk's loop); the result has the order of
+    the input, whatever order it came in."""
+    seen = _spy_on_chunks(monkeypatch)
+    p1, p2 = _pairs(7, 0)
+    paths = jg.shortest_paths(MESH, p1, p2, chunk_size=4)
+    chords = np.concatenate([_chord(c[0], c[1]) for c in seen[:2]])[:7]
+    assert np.all(np.diff(chords) >= 0)
+    flip = np.arange(7)[::-1]
+    again = jg.shortest_paths(MESH, p1[flip], p2[flip], chunk_size=4)
+    np.testing.assert_array_equal(again.length, paths.length[flip])
+    np.testing.assert_array_equal(again.start.face, paths.start.face[flip])
+    np.testing.assert_array_equal(again.points, paths.points[flip])
 
 
 @pytest.mark.mistyped
