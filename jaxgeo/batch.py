@@ -151,8 +151,8 @@ def _by_chord(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
     their chord's length. A chunk's compiled loop runs until its slowest start
     has converged, and its workers idle meanwhile (`exact._refine`); pairs of
     like length in one chunk make its tail shorter. 1,000 random pairs in chunks
-    of 256, CPU paths/s: 20k catenoid 84-86 → 91-95, `airplane.obj` 13.4 →
-    15.2 (`benchmarks/RESULTS.md`, session 26); the lengths are identical."""
+    of 256, CPU paths/s: 20k catenoid 85-87 → 93-94, `airplane.obj` 13.6 →
+    15.1 (`benchmarks/RESULTS.md`, session 26); the lengths are identical."""
     return np.argsort(np.linalg.norm(pb - pa, axis=1), kind="stable")
 
 
