@@ -24,7 +24,9 @@ and predecessor −1; padded edges' predecessor −1), so no start or path reach
 Padded faces are the point-like triangle (V, V, V) of the first padded vertex, with
 `face_component` −1 (`locate` skips them), `corner_angles` 0 and `face_edges` the
 first padded edge; padded edges are (V, V) with `edge_faces` (−1, −1) (the laser's
-`candidates="all"` skips them; real edges always have a face). Real elements keep
+`candidates="all"` skips them; real edges always have a face); padded vertices'
+angle sums are 0 and the per-component facts (`component_*`) False past the real
+labels, which no face carries. Real elements keep
 their indices, so paths on the padded mesh name the same faces, edges and vertices
 as on the real one. `jnp` padding of the vertices is differentiable: gradients flow
 back to the real rows (the padded rows' value is a `stop_gradient`).
@@ -116,6 +118,10 @@ RULES: dict[str, tuple[tuple[str | None, ...], Any]] = {
     "landmark_dist": ((None, "V"), np.inf),
     "edge_cut": (("E",), 0),
     "corner_angles": (("F", None), 0.0),
+    "vertex_angle_sums": (("V",), 0.0),
+    "component_cone_free": (("F",), False),
+    "component_disc": (("F",), False),
+    "component_annulus": (("F",), False),
 }
 
 
@@ -151,7 +157,12 @@ def _pad_vertices(v, n: int):
 
 #: The fields that follow the vertex positions (`Mesh.with_vertices` replaces
 #: them), padded and cached with the vertices rather than with the topology.
-GEOMETRY = ("vertices", "corner_angles")
+GEOMETRY = (
+    "vertices",
+    "corner_angles",
+    "vertex_angle_sums",
+    "component_cone_free",
+)
 
 
 def _topology_names(mesh: Mesh) -> list[str]:

@@ -39,7 +39,7 @@ whose single detours alone gives a longer path.
 
 **Certificate.** Where the endpoints' component has no cone vertex (every interior
 angle sum Θ(v) ≥ 2π: flat or saddle-shaped everywhere, as anticlastic membranes
-are), each homotopy class holds exactly one locally shortest path (`_topology`),
+are), each homotopy class holds exactly one locally shortest path (`jaxgeo._curvature`),
 so the detours, which stay in their class, are skipped, and a start stops as soon
 as another of its class has converged. On a disc there is one class: the first
 start to converge ends the search, and `stats.certified` is 1 (the path is
@@ -63,7 +63,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from . import _sleeve
+from . import _curvature, _sleeve
 from ._numerics import corner_angles, dot, last_at_or_before, run_of, safe_norm
 from ._starts import best_slots, corridor_from_nodes, face_fan_position, node_path
 from .locate import SurfacePoint, snap
@@ -85,56 +85,19 @@ class ExactStats(eqx.Module):
     #: 1 if a lane's corridor outgrew `corridor_capacity` (its path then failed,
     #: or another may be shorter): solve again with a larger capacity. A start
     #: another start of whose class converged does not count: it would have
-    #: reached the same path (`_topology`; 1 of 16 random pairs of a small
+    #: reached the same path (`jaxgeo._curvature`; 1 of 16 random pairs of a small
     #: catenoid at 24 faces, 8 when it counted)
     outgrew: Int[Array, "*B"]
     #: 1 if the path is certified globally shortest: its component is a disc
-    #: with no cone vertex (`_topology`), where a locally shortest path is the
+    #: with no cone vertex (`jaxgeo._curvature`), where a locally shortest path is the
     #: only one
     certified: Int[Array, "*B"]
 
 
 def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
-    """Θ(v): the sum of the face angles at every vertex."""
-    return _angle_sums(vertices, faces, corner_angles(vertices, faces))
-
-
-def _angle_sums(vertices, faces, angles):
-    return jnp.zeros(vertices.shape[0], vertices.dtype).at[faces].add(angles)
-
-
-def _topology(mesh: Mesh, theta, tol):
-    """Per connected component (indexed by label, `face_component`): whether no
-    interior vertex is a cone point (Θ(v) < 2π − tol, the cones `_detours` and
-    `_flips` act on), whether it is a disc (Euler characteristic V − E + F = 1;
-    2, a sphere, cannot be cone-free), and whether it is an annulus with a cut
-    (`jaxgeo._cuts`: characteristic 0, a boundary, cut edges).
-
-    Why it matters: a triangle mesh whose interior vertices all have Θ ≥ 2π is
-    locally CAT(0) (the link condition of a 2-dimensional piecewise Euclidean
-    complex; boundary points impose none), so its universal cover is CAT(0)
-    (Cartan–Hadamard; Bridson & Haefliger 1999, II.4.1), where a local geodesic
-    is the unique geodesic (II.1.4). Every locally shortest path is then the
-    only one in its homotopy class: the detours, which stay in the class (they
-    flip interior vertices, whose fans are discs), cannot find another, and two
-    starts of one class reach the same path. A disc has one class; an annulus
-    one per winding, which the cut counts (`_winding`). Anticlastic membranes
-    (saddles, sails, hypars, tents with a ring) are such meshes."""
-    n = mesh.face_component.shape[0]  # labels < F (padding: −1, dropped)
-    fc = mesh.face_component
-    v_comp = jnp.where(mesh.fan_size > 0, fc[jnp.maximum(mesh.fan_faces[:, 0], 0)], -1)
-    e_face = mesh.edge_faces[:, 0]
-    e_comp = jnp.where(e_face >= 0, fc[jnp.maximum(e_face, 0)], -1)
-
-    def count(labels, weight: Array | int = 1):
-        idx = jnp.where(labels >= 0, labels, n)
-        return jnp.zeros(n, jnp.int32).at[idx].add(weight, mode="drop")
-
-    cone = mesh.fan_closed & (mesh.fan_size > 0) & (theta < 2 * jnp.pi - tol)
-    cones = count(v_comp, cone.astype(jnp.int32))
-    euler = count(v_comp) - count(e_comp) + count(fc)
-    cut = count(e_comp, (mesh.edge_cut != 0).astype(jnp.int32))
-    return cones == 0, euler == 1, (euler == 0) & (cut > 0)
+    """Θ(v): the sum of the face angles at every vertex (`Mesh.vertex_angle_sums`
+    holds it for the mesh's own vertices)."""
+    return _curvature.angle_sums(faces, corner_angles(vertices, faces), len(vertices))
 
 
 def _on_cut(mesh: Mesh, end: _End):
@@ -631,7 +594,7 @@ def _settle(
 ) -> _Lane:
     """Stop the unfinished lanes whose key (`_refine`) has a converged lane (now
     or, `won_before`, earlier): it is the only locally shortest path of their
-    class (`_topology`), which they would reach again."""
+    class (`jaxgeo._curvature`), which they would reach again."""
     stop = _of_won_key(key, _won(lane, key, n_keys) | won_before) & ~lane.done
     status = jnp.where(stop, Status.REFINE_FAILED, lane.status).astype(jnp.int32)
     return eqx.tree_at(lambda x: (x.done, x.status), lane, (lane.done | stop, status))
@@ -886,7 +849,7 @@ def exact_solve(
     if max_iterations is None:
         max_iterations = max(256, cap)
     dtype = mesh.vertices.dtype
-    tol = 10 * float(jnp.finfo(dtype).eps) ** 0.5
+    tol = _curvature.cone_tolerance(dtype)
     s, t = (
         jax.vmap(lambda p: _end(mesh, p))(start),
         jax.vmap(lambda p: _end(mesh, p))(end),
@@ -894,8 +857,8 @@ def exact_solve(
     sg = jax.lax.stop_gradient
     smesh = sg(mesh)
     ss, ts = sg(s), sg(t)
-    angles = smesh.corner_angles  # (computed with the mesh)
-    theta = _angle_sums(smesh.vertices, smesh.faces, angles)
+    # (computed with the mesh: `jaxgeo._curvature`)
+    angles, theta = smesh.corner_angles, smesh.vertex_angle_sums
 
     def graph_vertex(e: _End):
         return smesh.faces[e.face, jnp.argmax(e.bary)]
@@ -908,13 +871,13 @@ def exact_solve(
         return jnp.repeat(x, k, axis=0)
 
     # cone-free components: the detours cannot find a shorter path, and two
-    # starts of one class reach the same one (`_topology`)
-    cone_free, disc, annulus = _topology(smesh, theta, tol)
+    # starts of one class reach the same one (`jaxgeo._curvature`)
     component = smesh.face_component[ss.point.face]
-    no_detours = cone_free[component]
-    certified = no_detours & disc[component]
+    no_detours = smesh.component_cone_free[component]
+    certified = no_detours & smesh.component_disc[component]
     on_cut = jax.vmap(lambda e: _on_cut(smesh, e))
-    known = certified | (no_detours & annulus[component] & ~on_cut(ss) & ~on_cut(ts))
+    annulus = smesh.component_annulus[component]
+    known = certified | (no_detours & annulus & ~on_cut(ss) & ~on_cut(ts))
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
     # (pyright misreads *args of unknown length followed by more arguments)
@@ -1026,7 +989,7 @@ def exact_solve(
             n_keys,
         )
         # a lane that outgrew the capacity matters unless a lane of its key
-        # converged: that is the path it would have reached (`_topology`)
+        # converged: that is the path it would have reached (`jaxgeo._curvature`)
         moot = _of_won_key(lane_key, _won(lanes, lane_key, n_keys))
         grew = ((lanes.status == Status.MAX_STEPS) & ~moot).reshape(n_pairs, k)
         lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)

@@ -24,6 +24,7 @@ import trimesh
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from scipy.sparse.csgraph import connected_components
 
+from . import _curvature
 from ._cuts import annulus_cuts
 from ._errors import JaxgeoError
 from ._fans import vertex_fans
@@ -128,6 +129,19 @@ def _orient(f: np.ndarray, edges: np.ndarray, edge_faces: np.ndarray) -> np.ndar
     return np.where(flip[:, None], f[:, ::-1], f)
 
 
+def _certificate_geometry(faces, angles, fans, dtype):
+    """Θ(v) and the per-component "no cone vertex" of the certificate
+    (`jaxgeo._curvature`), in numpy or JAX as the arguments are; `fans`:
+    `(face_component, fan_faces, fan_size, fan_closed)`."""
+    face_component, fan_faces, fan_size, fan_closed = fans
+    theta = _curvature.angle_sums(faces, angles, fan_size.shape[0])
+    tol = _curvature.cone_tolerance(dtype)
+    free = _curvature.cone_free(
+        face_component, fan_faces, fan_size, fan_closed, theta, tol
+    )
+    return theta, free
+
+
 def _vertex_faces(f: np.ndarray, n_vertices: int) -> np.ndarray:
     corner_vertex = f.ravel()
     order = np.argsort(corner_vertex, kind="stable")
@@ -174,6 +188,12 @@ class Mesh(eqx.Module):
       the exact method's flips and starts read (computed here and by
       `with_vertices` rather than per query: 1.7 ms of a 12 ms path on a 20k-face
       mesh). Change the vertices with `with_vertices`, which recomputes it.
+    - `vertex_angle_sums`: `(V,)` Θ(v), the sum of the face angles at each
+      vertex; `component_cone_free`, `component_disc`, `component_annulus`:
+      `(F,)` per component label, whether it has no interior cone vertex
+      (Θ < 2π), is a disc, or is an annulus with a cut: the facts of the exact
+      method's certificate (`jaxgeo._curvature`; 1 ms of a 11 ms path when
+      computed per query). `with_vertices` recomputes the first two.
 
     **Size classes.** The arrays above have the mesh's real sizes. The solvers
     are handed `mesh.padded()`, the same arrays padded to the mesh's
@@ -209,6 +229,10 @@ class Mesh(eqx.Module):
     landmark_dist: Float[Array, "M V"]
     edge_cut: Int[Array, " E"]
     corner_angles: Float[Array, "F 3"]
+    vertex_angle_sums: Float[Array, " V"]
+    component_cone_free: Bool[Array, " F"]
+    component_disc: Bool[Array, " F"]
+    component_annulus: Bool[Array, " F"]
 
     def __init__(
         self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS
@@ -244,8 +268,8 @@ class Mesh(eqx.Module):
         self.fan_size = jnp.asarray(fans["fan_size"])
         self.fan_closed = jnp.asarray(fans["fan_closed"])
         self.corner_fan_pos = jnp.asarray(fans["corner_fan_pos"])
-        vertex_component = np.where(
-            fans["fan_size"] > 0, component[np.maximum(fans["fan_faces"][:, 0], 0)], -1
+        vertex_component = np.asarray(
+            _curvature.vertex_component(component, fans["fan_faces"], fans["fan_size"])
         )
         forests = landmark_forests(
             v, f, edges, face_edges, vertex_component, max(int(landmarks), 1)
@@ -253,11 +277,21 @@ class Mesh(eqx.Module):
         self.landmark_pred_vertex = jnp.asarray(forests["pred_vertex"])
         self.landmark_pred_edge = jnp.asarray(forests["pred_edge"])
         self.landmark_dist = jnp.asarray(forests["dist_vertex"])
-        self.edge_cut = jnp.asarray(
-            annulus_cuts(v, f, edges, edge_faces, component, vertex_component),
-            jnp.int32,
+        cuts = annulus_cuts(v, f, edges, edge_faces, component, vertex_component)
+        self.edge_cut = jnp.asarray(cuts, jnp.int32)
+        angles = corner_angles_host(v, f)
+        self.corner_angles = jnp.asarray(angles, v.dtype)
+        fan_arrays = tuple(fans[k] for k in ("fan_faces", "fan_size", "fan_closed"))
+        theta, free = _certificate_geometry(
+            f, angles, (component, *fan_arrays), v.dtype
         )
-        self.corner_angles = jnp.asarray(corner_angles_host(v, f), v.dtype)
+        self.vertex_angle_sums = jnp.asarray(theta, v.dtype)
+        self.component_cone_free = jnp.asarray(free)
+        disc, annulus = _curvature.discs_and_annuli(
+            component, fans["fan_faces"], fans["fan_size"], edge_faces, cuts
+        )
+        self.component_disc = jnp.asarray(disc)
+        self.component_annulus = jnp.asarray(annulus)
 
     @property
     def n_vertices(self) -> int:
@@ -311,16 +345,33 @@ class Mesh(eqx.Module):
                 f"got {jnp.shape(vertices)}"
             )
         vertices = jnp.asarray(vertices)
+        fans = (self.face_component, self.fan_faces, self.fan_size, self.fan_closed)
         if not jnp.issubdtype(vertices.dtype, jnp.floating):
             # (refused where the mesh is used: `_checks.check_mesh_vertices`)
             angles = jnp.full_like(self.corner_angles, jnp.nan)
+            theta = jnp.full_like(self.vertex_angle_sums, jnp.nan)
+            free = self.component_cone_free
         elif isinstance(vertices, jax.core.Tracer):
             angles = corner_angles(vertices, self.faces)
+            theta, free = _certificate_geometry(
+                self.faces, jax.lax.stop_gradient(angles), fans, vertices.dtype
+            )
         else:
-            host = corner_angles_host(np.asarray(vertices), np.asarray(self.faces))
+            faces = np.asarray(self.faces)
+            host = corner_angles_host(np.asarray(vertices), faces)
+            theta, free = _certificate_geometry(
+                faces, host, tuple(np.asarray(x) for x in fans), vertices.dtype
+            )
             angles = jnp.asarray(host, vertices.dtype)
         return eqx.tree_at(
-            lambda m: (m.vertices, m.corner_angles), self, (vertices, angles)
+            lambda m: (
+                m.vertices,
+                m.corner_angles,
+                m.vertex_angle_sums,
+                m.component_cone_free,
+            ),
+            self,
+            (vertices, angles, jnp.asarray(theta, vertices.dtype), jnp.asarray(free)),
         )
 
     @classmethod

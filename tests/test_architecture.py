@@ -59,6 +59,7 @@ LAYERS: dict[str, tuple[set[str], set[str]]] = {
             "_fans",
             "_landmarks",
             "_cuts",
+            "_curvature",
             "_padding",
             "surfaces",
             "_grids",

@@ -403,9 +403,11 @@ def test_no_converged_start_is_a_failure_never_an_empty_path():
 
 
 def test_cone_free_meshes_discs_and_annuli_are_told_apart():
-    """The certificate's facts per component: no interior cone vertex (Θ < 2π),
-    Euler characteristic 1 (a disc), or 0 with a cut (an annulus)."""
-    from jaxgeo.exact import _topology, vertex_angle_sums
+    """The certificate's facts per component, which a `Mesh` holds: no interior
+    cone vertex (Θ < 2π), Euler characteristic 1 (a disc), or 0 with a cut (an
+    annulus). Vertices moved under a trace (`with_vertices` in `jax.jit`, as
+    under `jax.grad`) are judged in JAX as the mesh judged them in numpy."""
+    from jaxgeo.exact import vertex_angle_sums
 
     cases = {
         "saddle": (jg.Mesh(*surfaces.saddle(n=8)), True, True, False),
@@ -414,12 +416,24 @@ def test_cone_free_meshes_discs_and_annuli_are_told_apart():
         "icosphere": (unit_icosphere(2), False, False, False),
         "torus": (torus(), False, False, False),
     }
-    classify = jax.jit(
-        lambda m: _topology(m, vertex_angle_sums(m.vertices, m.faces), 1e-7)
-    )
     for name, (mesh, cone_free, disc, annulus) in cases.items():
-        got = [bool(x[0]) for x in classify(mesh)]
-        assert got == [cone_free, disc, annulus], name
+        facts = (mesh.component_cone_free, mesh.component_disc, mesh.component_annulus)
+        assert [bool(x[0]) for x in facts] == [cone_free, disc, annulus], name
+        traced = jax.jit(lambda v, m=mesh: m.with_vertices(v))(mesh.vertices)
+        np.testing.assert_array_equal(
+            traced.component_cone_free, mesh.component_cone_free
+        )
+        # (sums of the same angles in another order: rounding)
+        theta = vertex_angle_sums(mesh.vertices, mesh.faces)
+        np.testing.assert_allclose(mesh.vertex_angle_sums, theta, rtol=1e-14)
+        np.testing.assert_allclose(traced.vertex_angle_sums, theta, rtol=1e-14)
+    # a cone-free mesh moved to have a cone (a saddle's centre pulled up into a
+    # peak) is judged by its new vertices
+    mesh = cases["saddle"][0]
+    v = np.asarray(mesh.vertices).copy()
+    centre = np.argmin(np.linalg.norm(v[:, :2], axis=1))
+    v[centre, 2] += 1.0
+    assert not bool(mesh.with_vertices(v).component_cone_free[0])
 
 
 def test_the_cut_counts_the_windings_of_a_corridor():
