@@ -192,8 +192,8 @@ class Mesh(eqx.Module):
       vertex; `component_cone_free`, `component_disc`, `component_annulus`:
       `(F,)` per component label, whether it has no interior cone vertex
       (Θ < 2π), is a disc, or is an annulus with a cut: the facts of the exact
-      method's certificate (`jaxgeo._curvature`; 1 ms of a 11 ms path when
-      computed per query). `with_vertices` recomputes the first two.
+      method's certificate (`jaxgeo._curvature`; scatters over the whole mesh
+      when computed per query). `with_vertices` recomputes the first two.
 
     **Size classes.** The arrays above have the mesh's real sizes. The solvers
     are handed `mesh.padded()`, the same arrays padded to the mesh's
