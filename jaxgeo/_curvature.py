@@ -17,9 +17,9 @@ hypars, tents with a ring) are such meshes.
 `Mesh` stores these (`vertex_angle_sums`, `component_cone_free`,
 `component_disc`, `component_annulus`): computed per query they were scatters
 over the whole mesh, 0.7 ms on a 20k-face mesh (jitted alone) and 5–7 ms of an
-adjacent pair's 14–16 ms on a 100k-face catenoid. Each function takes numpy
-arrays (a concrete mesh: no per-size compile of eager JAX) or JAX arrays (the
-vertices traced by `Mesh.with_vertices` under `jax.grad`) alike.
+adjacent pair's 14–16 ms on a 100k-face catenoid. The functions of the angle
+sums take numpy arrays (a concrete mesh: no per-size compile of eager JAX) or
+JAX arrays (the vertices traced by `Mesh.with_vertices` under `jax.grad`) alike.
 """
 
 from __future__ import annotations
@@ -70,14 +70,14 @@ def cone_free(face_component, fan_faces, fan_size, fan_closed, theta, tol: float
 def discs_and_annuli(face_component, fan_faces, fan_size, edge_faces, edge_cut):
     """Per component label (< F): whether it is a disc (Euler characteristic
     V − E + F = 1; 2, a sphere, cannot be cone-free) and whether it is an
-    annulus with a cut (characteristic 0, cut edges: `jaxgeo._cuts`)."""
+    annulus with a cut (characteristic 0, cut edges: `jaxgeo._cuts`). Numpy
+    only: the connectivity does not change with the vertices."""
     n = face_component.shape[0]
-    xp = jnp if isinstance(face_component, jax.Array) else np
     e_face = edge_faces[:, 0]
-    e_comp = xp.where(e_face >= 0, face_component[xp.maximum(e_face, 0)], -1)
+    e_comp = np.where(e_face >= 0, face_component[np.maximum(e_face, 0)], -1)
 
     def count(labels, weight=None):
-        w = xp.ones(labels.shape[0], np.int32) if weight is None else weight
+        w = np.ones(labels.shape[0], np.int32) if weight is None else weight
         return _segment_sum(w, labels, n).astype(np.int32)
 
     v_comp = vertex_component(face_component, fan_faces, fan_size)
