@@ -100,31 +100,41 @@ def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
     return _curvature.angle_sums(faces, corner_angles(vertices, faces), len(vertices))
 
 
-def _on_cut(mesh: Mesh, end: _End):
-    """Does the endpoint lie on a cut edge or vertex? (Its winding is then
-    ambiguous: its corridors may begin on either side of the cut.)"""
-    cut = mesh.edge_cut != 0
-    spokes = mesh.vertex_faces[end.index]  # faces round a vertex endpoint
-    round_vertex = jnp.any(
-        (spokes >= 0)[:, None]
-        & cut[mesh.face_edges[jnp.maximum(spokes, 0)]]
-        & (mesh.faces[jnp.maximum(spokes, 0)] != end.index),  # (the opposite edge)
-        axis=1,
-    )
-    return jnp.where(
-        end.kind == VERTEX,
-        jnp.any(round_vertex),
-        jnp.where(end.kind == EDGE, cut[end.index], False),
-    )
-
-
-def _winding(mesh: Mesh, corridor, n):
-    """The signed count of the cut edges a corridor's portals cross."""
+def _winding(mesh: Mesh, corridor, n, s: _End, t: _End):
+    """A corridor's class on an annulus: the signed count of the cut edges its
+    portals cross, made independent of the faces round each endpoint it begins
+    and ends in. Where an endpoint lies on the cut (a vertex or an edge of it),
+    corridors of one class may begin on either side; each count is then read
+    as if the corridor first turned round the endpoint from a reference face
+    (its fan's first, the edge's face 0) to its own first face, and last from its
+    own last face back to the reference: `_turn_count`. Round an interior vertex
+    the cut is crossed once each way, so the way round does not matter."""
     edge, *_ = _sleeve.portals(mesh.faces, mesh.face_edges, corridor, n)
     live = jnp.arange(corridor.shape[0]) < n - 1
     forward = corridor == mesh.edge_faces[edge, 0]
     sign = jnp.where(forward, 1, -1) * mesh.edge_cut[edge]
-    return jnp.sum(jnp.where(live, sign, 0))
+    crossed = jnp.sum(jnp.where(live, sign, 0))
+    last = corridor[jnp.maximum(n - 1, 0)]
+    return _turn_count(mesh, s, corridor[0]) + crossed - _turn_count(mesh, t, last)
+
+
+def _turn_count(mesh: Mesh, end: _End, face):
+    """The signed cut crossings from an endpoint's reference face to `face`
+    (which holds it), turning round it (`_winding`)."""
+    fan = mesh.fan_faces[end.index]  # (a vertex endpoint's fan, in order)
+    f, g = jnp.maximum(fan[:-1], 0), jnp.maximum(fan[1:], 0)
+    fe, ge = mesh.face_edges[f], mesh.face_edges[g]
+    match = fe[:, :, None] == ge[:, None, :]
+    spoke = fe[jnp.arange(f.shape[0]), jnp.argmax(jnp.any(match, axis=2), axis=1)]
+    forward = f == mesh.edge_faces[spoke, 0]
+    step = jnp.where(fan[1:] >= 0, jnp.where(forward, 1, -1) * mesh.edge_cut[spoke], 0)
+    before = jnp.concatenate([jnp.zeros(1, step.dtype), jnp.cumsum(step)])
+    in_fan = before[face_fan_position(mesh, face, end.index)]
+    ef = mesh.edge_faces[end.index]
+    on_edge = jnp.where(face == ef[0], 0, mesh.edge_cut[end.index])
+    return jnp.where(
+        end.kind == VERTEX, in_fan, jnp.where(end.kind == EDGE, on_edge, 0)
+    )
 
 
 # ------------------------------------------------------------------- endpoints
@@ -875,9 +885,7 @@ def exact_solve(
     component = smesh.face_component[ss.point.face]
     no_detours = smesh.component_cone_free[component]
     certified = no_detours & smesh.component_disc[component]
-    on_cut = jax.vmap(lambda e: _on_cut(smesh, e))
-    annulus = smesh.component_annulus[component]
-    known = certified | (no_detours & annulus & ~on_cut(ss) & ~on_cut(ts))
+    known = certified | (no_detours & smesh.component_annulus[component])
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
     # (pyright misreads *args of unknown length followed by more arguments)
@@ -886,7 +894,9 @@ def exact_solve(
     )
     # a start's key: its pair and winding, where the class is known (windings
     # beyond ±WINDINGS: none)
-    winding = jax.vmap(lambda c, m_: _winding(smesh, c, m_))(starts[0], starts[1])
+    winding = jax.vmap(lambda c, m_, a, b: _winding(smesh, c, m_, a, b))(
+        starts[0], starts[1], s_l, t_l
+    )
     pair = jnp.repeat(jnp.arange(n_pairs), k)
     n_keys = n_pairs * (2 * WINDINGS + 1)
     key = jnp.where(

@@ -438,8 +438,11 @@ def test_cone_free_meshes_discs_and_annuli_are_told_apart():
 
 def test_the_cut_counts_the_windings_of_a_corridor():
     """A ring of faces once round the catenoid crosses its cut once (winding
-    ±1, the sign by the direction), there and back 0, twice round ±2."""
-    from jaxgeo.exact import _winding
+    ±1, the sign by the direction), there and back 0, twice round ±2. From a
+    vertex on the cut, corridors that begin in any face round it and end in
+    one face are one class: one winding, whichever side of the cut they
+    begin on and whichever way round they turn."""
+    from jaxgeo.exact import _end, _winding
 
     mesh = jg.Mesh(*surfaces.catenoid(24, 10))
     faces = np.asarray(mesh.faces)
@@ -449,18 +452,40 @@ def test_the_cut_counts_the_windings_of_a_corridor():
     centre = np.asarray(mesh.vertices)[faces[band]].mean(1)
     ring = band[np.argsort(np.arctan2(centre[:, 1], centre[:, 0]))]
     assert len(ring) == 48  # 24 quads, two triangles each, in order round
+    third = jnp.full(3, 1 / 3)
 
-    def wind(corridor):
+    def in_face(f):
+        return _end(mesh, jg.SurfacePoint(jnp.int32(f), third))
+
+    def wind(corridor, s=None):
         cap = 128
         c = np.full(cap, -1)
         c[: len(corridor)] = corridor
-        return int(_winding(mesh, jnp.asarray(c), len(corridor)))
+        s = in_face(corridor[0]) if s is None else s
+        t = in_face(corridor[-1])
+        return int(_winding(mesh, jnp.asarray(c), len(corridor), s, t))
 
     once = np.r_[ring, ring[:1]]
     assert abs(wind(once)) == 1
     assert wind(once[::-1]) == -wind(once)
     assert wind(np.r_[once, once[-2::-1]]) == 0
     assert wind(np.r_[ring, ring, ring[:1]]) == 2 * wind(once)
+
+    # a vertex on the cut, away from the boundary: corridors turning round it
+    # from each of its faces to one face, both ways
+    cut = np.asarray(mesh.edge_cut) != 0
+    on_cut = np.unique(np.asarray(mesh.edges)[cut])
+    v = int(on_cut[np.argmin(np.abs(z[on_cut] - np.median(z)))])
+    s = _end(mesh, jg.SurfacePoint.vertex(mesh, v))
+    fan = np.asarray(mesh.fan_faces[v])
+    fan = fan[fan >= 0]
+    assert bool(mesh.fan_closed[v]) and len(fan) == 6
+    target = fan[0]
+    counts = {wind(fan[p::-1], s) for p in range(len(fan))}  # p, p - 1, …, 0
+    counts |= {wind(np.r_[fan[p:], fan[:1]], s) for p in range(1, len(fan))}
+    assert counts == {wind(np.r_[target], s)}
+    # while without the endpoint's turn the cut crossings differ by side
+    assert len({wind(fan[p::-1]) for p in range(len(fan))}) == 2
 
 
 @pytest.mark.slow  # > 5 s on 2 cores (README tests <= 5 min)
@@ -492,12 +517,17 @@ def test_on_an_annulus_without_cones_one_start_per_winding_is_enough():
     of them has converged, and every length is still MMP's (rate 1). This
     caught a string that went round a saddle vertex by more than 2π (a U-turn
     on its wide side) and was read, through the wrapped arctangent, as a wrap
-    of almost nothing: 3 of these 120 pairs ended up to 46 % too long."""
+    of almost nothing: 3 of these 120 pairs ended up to 46 % too long. 24 more
+    pairs begin on the cut, where a start's winding is read as if it turned
+    round its endpoint to a reference face (`exact._winding`)."""
     mesh = jg.Mesh(*surfaces.catenoid(100, 40))
     v = np.asarray(mesh.vertices)
     rng = np.random.default_rng(7)
     pairs = rng.integers(0, mesh.n_vertices, (150, 2))
     pairs = pairs[pairs[:, 0] != pairs[:, 1]][:120]
+    on_cut = np.unique(np.asarray(mesh.edges)[np.asarray(mesh.edge_cut) != 0])
+    ends = rng.choice(mesh.n_vertices, 24)
+    pairs = np.r_[pairs, np.c_[rng.choice(on_cut, 24), ends]]
     paths = jg.shortest_paths(mesh, v[pairs[:, 0]], v[pairs[:, 1]], max_points=POINTS)
     assert np.all(paths.status == jg.Status.SUCCESS)
     algo = pg.PyGeodesicAlgorithmExact(v, np.asarray(mesh.faces))
