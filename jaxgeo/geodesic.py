@@ -28,6 +28,7 @@ from .methods import (
     Method,
     as_method,
     first_attempts,
+    for_mesh,
     initial_status,
 )
 from .normals import Weighting
@@ -132,7 +133,8 @@ def checked_method(
         max_distance,
         throw,
     )
-    return as_method(method, candidates=candidates, normals=normals), int(max_points)
+    m = as_method(method, candidates=candidates, normals=normals)
+    return for_mesh(m, mesh), int(max_points)
 
 
 @eqx.filter_jit

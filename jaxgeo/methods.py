@@ -14,10 +14,11 @@ from typing import Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Int
 
 from ._errors import JaxgeoError
-from .exact import exact_solve
+from .exact import POOL_MIN_CONE_FREE, exact_solve
 from .locate import SurfacePoint
 from .mesh import Mesh
 from .normals import Weighting, vertex_normals
@@ -40,7 +41,8 @@ class Exact(eqx.Module):
     more often on scanned meshes (`docs/accuracy.md`).
     The default method. `corridor_capacity`: faces a corridor may hold (None:
     `max_points`; `shortest_path` then tries 256 first, `shortest_paths` 256
-    and 512, see `first_attempts`)."""
+    and 512, see `first_attempts`). `min_lanes`: the flip loop's lanes at least
+    (None: 1 on a concrete mesh with no cone vertex, else 4; see `for_mesh`)."""
 
     max_starts: int = 8
     max_iterations: int | None = None  # None: the corridor capacity, >= 256
@@ -48,6 +50,7 @@ class Exact(eqx.Module):
     detour_rounds: int = 2
     walls: bool = True
     corridor_capacity: int | None = None
+    min_lanes: int | None = None
 
     def solve(self, mesh, start, end, initial, max_points, differentiable) -> Path:
         res = exact_solve(
@@ -61,6 +64,7 @@ class Exact(eqx.Module):
             detour_rounds=self.detour_rounds,
             walls=self.walls,
             corridor_capacity=self.corridor_capacity,
+            min_lanes=self.min_lanes,
         )
         status = jnp.where(initial >= 0, initial, res.status).astype(jnp.int32)
         stats = {
@@ -193,6 +197,24 @@ def first_attempts(method: AnyMethod, max_points: int) -> list[AnyMethod]:
             for e in first_attempts(method.exact, max_points)
         ]
     return []
+
+
+def for_mesh(method: AnyMethod, mesh: Mesh) -> AnyMethod:
+    """`method` with the options it leaves to the mesh set, where the mesh is
+    concrete: the exact engine's `min_lanes` is 1 on a mesh with no cone vertex
+    (`exact.POOL_MIN_CONE_FREE`; a static choice, so one program per mesh, not
+    one per branch). A traced mesh keeps the defaults."""
+    if isinstance(method, Smooth):
+        return dataclasses.replace(method, exact=for_mesh(method.exact, mesh))
+    if not isinstance(method, Exact) or method.min_lanes is not None:
+        return method
+    try:
+        cone_free = bool(np.all(np.asarray(mesh.component_cone_free)))
+    except jax.errors.JAXTypeError:  # traced (`Mesh.with_vertices` under jit)
+        return method
+    return dataclasses.replace(
+        method, min_lanes=POOL_MIN_CONE_FREE if cone_free else None
+    )
 
 
 Method = Literal["exact", "laser", "smooth"] | AnyMethod

@@ -109,3 +109,45 @@ def test_smooth_is_closer_to_the_analytic_catenoid_than_exact():
             length = float(jg.path_length(mesh, v[i], v[j], method=method))
             errs[method].append(abs(length - ref) / ref)
     assert np.median(errs["smooth"]) < np.median(errs["exact"]) / 10
+
+
+def test_for_mesh_runs_one_lane_on_a_mesh_with_no_cone_vertex():
+    """On a concrete cone-free mesh the exact engine's flip loop runs one lane
+    (its first converged start settles the others of its class); elsewhere, on
+    a traced mesh, and where the caller chose, the options stay."""
+    from jaxgeo.exact import POOL_MIN_CONE_FREE
+    from jaxgeo.methods import for_mesh
+
+    cone_free = catenoid()
+    with_cones = jg.Mesh(*surfaces.icosphere(2))
+    assert for_mesh(jg.Exact(), cone_free).min_lanes == POOL_MIN_CONE_FREE == 1
+    assert for_mesh(jg.Smooth(), cone_free).exact.min_lanes == 1
+    assert for_mesh(jg.Exact(), with_cones).min_lanes is None
+    assert for_mesh(jg.Exact(min_lanes=3), cone_free).min_lanes == 3
+    assert for_mesh(jg.Laser(), cone_free) == jg.Laser()
+    seen = []
+
+    @jax.jit
+    def traced(v):
+        seen.append(for_mesh(jg.Exact(), cone_free.with_vertices(v)).min_lanes)
+        return v
+
+    traced(cone_free.vertices)
+    assert seen == [None]
+
+
+@pytest.mark.slow  # two compiles of the exact path (~25 s)
+def test_one_lane_and_four_give_the_same_paths_on_a_cone_free_mesh():
+    """`min_lanes` changes how many starts run at once, not the path: on the
+    catenoid (no cone vertex) the lengths at 1 and 4 lanes agree to rounding
+    (the same corridor, unfolded in lanes of another width: 1e-12)."""
+    mesh = catenoid()
+    pairs = np.random.default_rng(5).integers(0, mesh.n_vertices, (6, 2))
+
+    def lengths(lanes):
+        method = jg.Exact(min_lanes=lanes)
+        return [
+            float(jg.path_length(mesh, int(a), int(b), method=method)) for a, b in pairs
+        ]
+
+    np.testing.assert_allclose(lengths(1), lengths(4), rtol=1e-12)
