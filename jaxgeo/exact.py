@@ -100,6 +100,16 @@ def vertex_angle_sums(vertices: Float[Array, "V 3"], faces: Int[Array, "F 3"]):
     return _curvature.angle_sums(faces, corner_angles(vertices, faces), len(vertices))
 
 
+def _cut_crossings(mesh: Mesh, corridor, n):
+    """The signed count of the cut each portal of a corridor crosses (+1 from
+    `edge_faces[e, 0]` to `edge_faces[e, 1]` of a +1 cut edge; 0 off the cut
+    and past the corridor's n faces)."""
+    edge, *_ = _sleeve.portals(mesh.faces, mesh.face_edges, corridor, n)
+    live = jnp.arange(corridor.shape[0]) < n - 1
+    forward = corridor == mesh.edge_faces[edge, 0]
+    return jnp.where(live, jnp.where(forward, 1, -1) * mesh.edge_cut[edge], 0)
+
+
 def _winding(mesh: Mesh, corridor, n, s: _End, t: _End):
     """A corridor's class on an annulus: the signed count of the cut edges its
     portals cross, made independent of the faces round each endpoint it begins
@@ -109,26 +119,18 @@ def _winding(mesh: Mesh, corridor, n, s: _End, t: _End):
     (its fan's first, the edge's face 0) to its own first face, and last from its
     own last face back to the reference: `_turn_count`. Round an interior vertex
     the cut is crossed once each way, so the way round does not matter."""
-    edge, *_ = _sleeve.portals(mesh.faces, mesh.face_edges, corridor, n)
-    live = jnp.arange(corridor.shape[0]) < n - 1
-    forward = corridor == mesh.edge_faces[edge, 0]
-    sign = jnp.where(forward, 1, -1) * mesh.edge_cut[edge]
-    crossed = jnp.sum(jnp.where(live, sign, 0))
+    crossed = jnp.sum(_cut_crossings(mesh, corridor, n))
     last = corridor[jnp.maximum(n - 1, 0)]
     return _turn_count(mesh, s, corridor[0]) + crossed - _turn_count(mesh, t, last)
 
 
 def _turn_count(mesh: Mesh, end: _End, face):
     """The signed cut crossings from an endpoint's reference face to `face`
-    (which holds it), turning round it (`_winding`)."""
-    fan = mesh.fan_faces[end.index]  # (a vertex endpoint's fan, in order)
-    f, g = jnp.maximum(fan[:-1], 0), jnp.maximum(fan[1:], 0)
-    fe, ge = mesh.face_edges[f], mesh.face_edges[g]
-    match = fe[:, :, None] == ge[:, None, :]
-    spoke = fe[jnp.arange(f.shape[0]), jnp.argmax(jnp.any(match, axis=2), axis=1)]
-    forward = f == mesh.edge_faces[spoke, 0]
-    step = jnp.where(fan[1:] >= 0, jnp.where(forward, 1, -1) * mesh.edge_cut[spoke], 0)
-    before = jnp.concatenate([jnp.zeros(1, step.dtype), jnp.cumsum(step)])
+    (which holds it), turning round it (`_winding`): a vertex's fan, in order,
+    is a corridor."""
+    fan = jnp.maximum(mesh.fan_faces[end.index], 0)
+    steps = _cut_crossings(mesh, fan, mesh.fan_size[end.index])
+    before = jnp.concatenate([jnp.zeros(1, steps.dtype), jnp.cumsum(steps)])
     in_fan = before[face_fan_position(mesh, face, end.index)]
     ef = mesh.edge_faces[end.index]
     on_edge = jnp.where(face == ef[0], 0, mesh.edge_cut[end.index])

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Int
 
+from ._checks import is_traced
 from ._errors import JaxgeoError
 from .exact import POOL_MIN_CONE_FREE, exact_solve
 from .locate import SurfacePoint
@@ -208,10 +209,9 @@ def for_mesh(method: AnyMethod, mesh: Mesh) -> AnyMethod:
         return dataclasses.replace(method, exact=for_mesh(method.exact, mesh))
     if not isinstance(method, Exact) or method.min_lanes is not None:
         return method
-    try:
-        cone_free = bool(np.all(np.asarray(mesh.component_cone_free)))
-    except jax.errors.JAXTypeError:  # traced (`Mesh.with_vertices` under jit)
+    if is_traced(mesh.component_cone_free):  # (`Mesh.with_vertices` under jit)
         return method
+    cone_free = bool(np.all(np.asarray(mesh.component_cone_free)))
     return dataclasses.replace(
         method, min_lanes=POOL_MIN_CONE_FREE if cone_free else None
     )
