@@ -122,6 +122,7 @@ RULES: dict[str, tuple[tuple[str | None, ...], Any]] = {
     "component_cone_free": (("F",), False),
     "component_disc": (("F",), False),
     "component_annulus": (("F",), False),
+    "component_systole": (("F",), 0.0),
 }
 
 
@@ -162,6 +163,7 @@ GEOMETRY = (
     "corner_angles",
     "vertex_angle_sums",
     "component_cone_free",
+    "component_systole",
 )
 
 

@@ -25,7 +25,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from scipy.sparse.csgraph import connected_components
 
 from . import _curvature
-from ._cuts import annulus_cuts
+from ._cuts import annulus_cuts, annulus_systoles
 from ._errors import JaxgeoError
 from ._fans import vertex_fans
 from ._landmarks import DEFAULT_LANDMARKS, landmark_forests
@@ -194,6 +194,11 @@ class Mesh(eqx.Module):
       (Θ < 2π), is a disc, or is an annulus with a cut: the facts of the exact
       method's certificate (`jaxgeo._curvature`; scatters over the whole mesh
       when computed per query). `with_vertices` recomputes the first two.
+    - `component_systole`: `(F,)` per component label, a lower bound of the
+      length of every closed curve winding round it where it is an annulus, 0
+      elsewhere (`jaxgeo._cuts`): the exact method certifies a path at most half
+      as long globally shortest. `with_vertices` recomputes it (0, no bound,
+      for traced vertices).
 
     **Size classes.** The arrays above have the mesh's real sizes. The solvers
     are handed `mesh.padded()`, the same arrays padded to the mesh's
@@ -233,6 +238,7 @@ class Mesh(eqx.Module):
     component_cone_free: Bool[Array, " F"]
     component_disc: Bool[Array, " F"]
     component_annulus: Bool[Array, " F"]
+    component_systole: Float[Array, " F"]
 
     def __init__(
         self, vertices: Any, faces: Any, *, landmarks: int = DEFAULT_LANDMARKS
@@ -292,6 +298,10 @@ class Mesh(eqx.Module):
         )
         self.component_disc = jnp.asarray(disc)
         self.component_annulus = jnp.asarray(annulus)
+        self.component_systole = jnp.asarray(
+            annulus_systoles(v, edges, edge_faces, component, vertex_component),
+            v.dtype,
+        )
 
     @property
     def n_vertices(self) -> int:
@@ -346,6 +356,9 @@ class Mesh(eqx.Module):
             )
         vertices = jnp.asarray(vertices)
         fans = (self.face_component, self.fan_faces, self.fan_size, self.fan_closed)
+        # (no systole bound for traced vertices: the exact method then runs the
+        # other windings' starts, as without a certificate)
+        systole = jnp.zeros_like(self.component_systole)
         if not jnp.issubdtype(vertices.dtype, jnp.floating):
             # (refused where the mesh is used: `_checks.check_mesh_vertices`)
             angles = jnp.full_like(self.corner_angles, jnp.nan)
@@ -363,15 +376,34 @@ class Mesh(eqx.Module):
                 faces, host, tuple(np.asarray(x) for x in fans), vertices.dtype
             )
             angles = jnp.asarray(host, vertices.dtype)
+            component = np.asarray(self.face_component)
+            systole = annulus_systoles(
+                np.asarray(vertices),
+                np.asarray(self.edges),
+                np.asarray(self.edge_faces),
+                component,
+                np.asarray(
+                    _curvature.vertex_component(
+                        component, np.asarray(self.fan_faces), np.asarray(self.fan_size)
+                    )
+                ),
+            )
         return eqx.tree_at(
             lambda m: (
                 m.vertices,
                 m.corner_angles,
                 m.vertex_angle_sums,
                 m.component_cone_free,
+                m.component_systole,
             ),
             self,
-            (vertices, angles, jnp.asarray(theta, vertices.dtype), jnp.asarray(free)),
+            (
+                vertices,
+                angles,
+                jnp.asarray(theta, vertices.dtype),
+                jnp.asarray(free),
+                jnp.asarray(systole, vertices.dtype),
+            ),
         )
 
     @classmethod
