@@ -44,9 +44,12 @@ so the detours, which stay in their class, are skipped, and a start stops as soo
 as another of its class has converged. On a disc there is one class: the first
 start to converge ends the search, and `stats.certified` is 1 (the path is
 globally shortest). On an annulus the class is the winding, counted by the cut
-edges a corridor crosses (`jaxgeo._cuts`). A start is converged only if its
-string wraps no vertex by more than a turn (which no wedge flip can release):
-such a string is shortest round the vertex, not on the surface.
+edges a corridor crosses (`jaxgeo._cuts`); a path of another winding joins the
+converged one L* into a closed curve round the annulus, at least its systole, so
+where 2 L* is at most a lower bound of the systole (`Mesh.component_systole`) the
+other windings' starts stop too and the path is certified. A start is converged
+only if its string wraps no vertex by more than a turn (which no wedge flip can
+release): such a string is shortest round the vertex, not on the surface.
 
 **Gradients.** The discrete choices (corridor, wrapped vertices) are made under
 `stop_gradient`; the length is then recomputed from the live vertices and endpoint
@@ -90,7 +93,8 @@ class ExactStats(eqx.Module):
     outgrew: Int[Array, "*B"]
     #: 1 if the path is certified globally shortest: its component is a disc
     #: with no cone vertex (`jaxgeo._curvature`), where a locally shortest path is the
-    #: only one
+    #: only one, or an annulus with no cone vertex whose systole is at least twice
+    #: the path (`Mesh.component_systole`): a path of another winding is no shorter
     certified: Int[Array, "*B"]
 
 
@@ -597,11 +601,28 @@ def _fresh(corridor, n, status0, dtype) -> _Lane:
     )
 
 
-def _won(lane: _Lane, key, n_keys: int):
-    """Keys (`_refine`) one of whose lanes converged."""
+def _won(lane: _Lane, key, n_keys: int, systole=None):
+    """Keys (`_refine`) one of whose lanes converged, and with `systole` (per
+    pair, whose keys are rows of 2·`WINDINGS` + 1) every key of a pair with a
+    converged path at most half of it (`_certified_by_systole`)."""
     idx = jnp.where(key >= 0, key, n_keys)
     ok = lane.status == Status.SUCCESS
-    return jnp.zeros(n_keys, bool).at[idx].max(ok, mode="drop")
+    won = jnp.zeros(n_keys, bool).at[idx].max(ok, mode="drop")
+    if systole is None:
+        return won
+    length = jnp.where(ok, lane.length, jnp.inf)
+    least = jnp.full(n_keys, jnp.inf, length.dtype).at[idx].min(length, mode="drop")
+    least = jnp.min(least.reshape(-1, 2 * WINDINGS + 1), axis=1)
+    sure = _certified_by_systole(least, systole)
+    return won | jnp.repeat(sure, 2 * WINDINGS + 1)
+
+
+def _certified_by_systole(length, systole):
+    """Is a converged path of `length` on an annulus globally shortest? A path
+    of another winding closes with it into a curve winding round the annulus,
+    at least its `systole` (a lower bound, `jaxgeo._cuts`): it is at least
+    systole − length, no shorter where 2·length ≤ systole (to rounding)."""
+    return 2 * length <= systole * (1 - 1e-9)
 
 
 def _of_won_key(key, won: Bool[Array, " K"]):
@@ -610,12 +631,18 @@ def _of_won_key(key, won: Bool[Array, " K"]):
 
 
 def _settle(
-    lane: _Lane, key, n_keys: int, won_before: Bool[Array, " K"] | bool = False
+    lane: _Lane,
+    key,
+    n_keys: int,
+    won_before: Bool[Array, " K"] | bool = False,
+    systole=None,
 ) -> _Lane:
     """Stop the unfinished lanes whose key (`_refine`) has a converged lane (now
     or, `won_before`, earlier): it is the only locally shortest path of their
-    class (`jaxgeo._curvature`), which they would reach again."""
-    stop = _of_won_key(key, _won(lane, key, n_keys) | won_before) & ~lane.done
+    class (`jaxgeo._curvature`), which they would reach again; with `systole`,
+    also those of a pair certified by it (`_won`)."""
+    won = _won(lane, key, n_keys, systole) | won_before
+    stop = _of_won_key(key, won) & ~lane.done
     status = jnp.where(stop, Status.REFINE_FAILED, lane.status).astype(jnp.int32)
     return eqx.tree_at(lambda x: (x.done, x.status), lane, (lane.done | stop, status))
 
@@ -633,12 +660,15 @@ def _refine(
     key,
     n_keys: int,
     min_lanes: int | None = None,
+    systole=None,
+    won_before: Bool[Array, " K"] | bool = False,
 ):
     """Flip until no wrapped vertex admits a shorter way round, for a batch of
     starts (leading axis T of every argument but `mesh`, `theta`). `key` (T,):
     starts of one key (< `n_keys`) reach the same path, and the others stop
-    when one has converged (−1: none). `min_lanes`: `POOL_MIN` (None: as the
-    module sets it).
+    when one has converged (−1: none), here or before (`won_before`); with
+    `systole` (per pair, `_won`), all starts of a pair stop once it is
+    certified. `min_lanes`: `POOL_MIN` (None: as the module sets it).
 
     Starts converge in very different numbers of rounds (on random pairs of the
     20k catenoid 25 on average, up to 62): a loop over all T lanes at once would
@@ -664,8 +694,10 @@ def _refine(
     if tasks <= min_lanes:
         lane = jax.lax.while_loop(
             lambda lane: jnp.any(~finished(lane)),
-            lambda lane: _settle(_round(mesh, theta, lane, s, t, tol), key, n_keys),
-            _fresh(corridor, n, status0, dtype),
+            lambda lane: _settle(
+                _round(mesh, theta, lane, s, t, tol), key, n_keys, won_before, systole
+            ),
+            _settle(_fresh(corridor, n, status0, dtype), key, n_keys, won_before),
         )
         return result(lane)
 
@@ -700,29 +732,43 @@ def _refine(
             lambda r, x: r.at[slot].set(x, mode="drop"), results, result(lane)
         )
 
+    def hand_out(won, next_, out):
+        """The queue's next starts whose key has not converged (the others are
+        settled: a worker would spend a round loading each), one to each `out`
+        worker in order; and where the queue now begins."""
+        position = jnp.arange(tasks)
+        queued = (position >= next_) & (position < live)
+        wanted = queued & ~_of_won_key(key[order], won)
+        nth = jnp.cumsum(wanted, dtype=jnp.int32)  # wanted up to each position
+        rank = jnp.cumsum(out, dtype=jnp.int32)  # 1, 2, …: the `out` workers
+        pick = jnp.searchsorted(nth, rank, side="left").astype(jnp.int32)
+        picked = out & (pick < live)
+        new_task = jnp.where(picked, order[jnp.minimum(pick, tasks - 1)], tasks)
+        handed = jnp.max(jnp.where(picked, pick + 1, next_))
+        wanted_left = nth[-1] > jnp.sum(out, dtype=jnp.int32)
+        return new_task, jnp.where(wanted_left, handed, live)
+
     def body(state):
         lane, task, next_, results = state
         s_w, t_w = ends(task)
         lane = _round(mesh, theta, lane, s_w, t_w, tol)
         # (a pair may have won in this round's lanes or in an earlier result)
-        earlier = _won(results, key, n_keys)
-        lane = _settle(lane, key[jnp.minimum(task, tasks - 1)], n_keys, earlier)
+        earlier = _won(results, key, n_keys, systole) | won_before
+        lane = _settle(
+            lane, key[jnp.minimum(task, tasks - 1)], n_keys, earlier, systole
+        )
         out = finished(lane)
         # write what finished, then hand out the next starts in worker order
         results = write(results, lane, task)
-        rank = jnp.cumsum(out) - 1
-        pick = next_ + rank
-        new_task = jnp.where(pick < live, order[jnp.minimum(pick, tasks - 1)], tasks)
+        won = _won(results, key, n_keys, systole) | won_before
+        new_task, next_ = hand_out(won, next_, out)
         task = jnp.where(out, new_task, task)
-        # (a start whose key has converged already is settled as it is loaded)
-        won = _won(results, key, n_keys)
-        fresh = _settle(load(task), key[jnp.minimum(task, tasks - 1)], n_keys, won)
         lane = jax.tree.map(
             lambda f, x: jnp.where(out.reshape(out.shape + (1,) * (x.ndim - 1)), f, x),
-            fresh,
+            load(task),
             lane,
         )
-        return lane, task, next_ + jnp.sum(out, dtype=jnp.int32), results
+        return lane, task, next_, results
 
     # The loops of a narrowing pool, W, W/POOL_SHRINK, …: the slowest starts
     # take three times the mean number of rounds, and one loop over all W
@@ -731,10 +777,10 @@ def _refine(
     widths = [workers]
     while widths[-1] // POOL_SHRINK >= POOL_SHRINK:
         widths.append(widths[-1] // POOL_SHRINK)
-    first = jnp.arange(workers, dtype=jnp.int32)
-    task = jnp.where(first < live, order[jnp.minimum(first, tasks - 1)], tasks)
+    none_won = jnp.zeros(n_keys, bool) | won_before
+    task, next_ = hand_out(none_won, 0, jnp.ones(workers, bool))
     results = _fresh(corridor, n, status0, dtype)
-    state = (load(task), task, jnp.minimum(live, workers), results)
+    state = (load(task), task, next_, results)
     for smaller in widths[1:] + [0]:
 
         def cond(state, smaller=smaller):
@@ -749,7 +795,8 @@ def _refine(
             lane, task = jax.tree.map(lambda x, k=keep: x[k], (lane, task))
             task = jnp.where(finished(lane), tasks, task)
         state = (lane, task, next_, results)
-    return state[3]
+    # the starts never handed out, their key having converged, are settled
+    return _settle(state[3], key, n_keys, won_before, systole)
 
 
 def _start(mesh, angles, slot, slot_ok, vs, vt, s, t, cap):
@@ -909,34 +956,67 @@ def exact_solve(
     # starts of one class reach the same one (`jaxgeo._curvature`)
     component = smesh.face_component[ss.point.face]
     no_detours = smesh.component_cone_free[component]
-    certified = no_detours & smesh.component_disc[component]
-    known = certified | (no_detours & smesh.component_annulus[component])
+    disc = no_detours & smesh.component_disc[component]
+    annulus = no_detours & smesh.component_annulus[component]
+    known = disc | annulus
+    # (a cone-free annulus's path at most half its systole is the shortest)
+    systole = jnp.where(annulus, smesh.component_systole[component], 0)
+
+    def _settled(length):  # a converged path of `length` is globally shortest
+        return disc | (annulus & _certified_by_systole(length, systole))
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
-    # (pyright misreads *args of unknown length followed by more arguments)
-    starts = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(  # pyright: ignore[reportCallIssue]
-        slots.reshape(-1), slot_ok.reshape(-1), lanes_of(vs), lanes_of(vt), s_l, t_l
-    )
-    # a start's key: its pair and winding, where the class is known (windings
-    # beyond ±WINDINGS: none)
-    winding = jax.vmap(lambda c, m_, a, b: _winding(smesh, c, m_, a, b))(
-        starts[0], starts[1], s_l, t_l
-    )
-    pair = jnp.repeat(jnp.arange(n_pairs), k)
     n_keys = n_pairs * (2 * WINDINGS + 1)
-    key = jnp.where(
-        known[pair] & (jnp.abs(winding) <= WINDINGS),
-        pair * (2 * WINDINGS + 1) + winding + WINDINGS,
-        -1,
+    lanes = n_pairs * k
+    unused = (
+        jnp.full((lanes, cap), -1, jnp.int32),
+        jnp.zeros(lanes, jnp.int32),
+        jnp.full(lanes, Status.REFINE_FAILED, jnp.int32),
     )
+    no_keys = jnp.full(lanes, -1, jnp.int32)
+
+    def starts_of(lo, hi, open_):
+        """The start corridors of the slots lo … hi − 1 of every open pair (the
+        other lanes unused), and their keys: their pair and winding, where the
+        class is known (windings beyond ±WINDINGS: none). One slot of every pair
+        at a time: the loop's body is the one compiled start of every phase."""
+
+        def one_slot(j, built):
+            (corridor, n, status0), key = built
+            one = jnp.arange(n_pairs)
+            c, m, st = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(  # pyright: ignore[reportCallIssue]
+                slots[:, j], slot_ok[:, j] & open_, vs, vt, ss, ts
+            )
+            winding = jax.vmap(lambda *x: _winding(smesh, *x))(c, m, ss, ts)
+            kj = jnp.where(
+                known & (jnp.abs(winding) <= WINDINGS),
+                one * (2 * WINDINGS + 1) + winding + WINDINGS,
+                -1,
+            )
+            rows = one * k + j
+            return (
+                corridor.at[rows].set(c),
+                n.at[rows].set(m),
+                status0.at[rows].set(st),
+            ), key.at[rows].set(kj.astype(jnp.int32))
+
+        return jax.lax.fori_loop(lo, hi, one_slot, (unused, no_keys))
+
     # Phase 0 refines the k starts of every pair; then each of `detour_rounds`
     # rounds takes the detours of the best path so far, k at a time. All phases
     # run through one `_refine` inside a fori_loop: it is the bulk of the program,
     # and compiled once instead of once per phase (a third of the compile time).
+    # With `min_lanes` 1 (meshes with no cone vertex, `POOL_MIN_CONE_FREE`) a
+    # phase before it refines the first start of every pair alone, and phase 0
+    # the others of the pairs it did not settle (certified, `_settled`): most
+    # single paths then build one start rather than k (20k catenoid: 0.6 ms
+    # against 1.9, and the refinement of the other starts' corridors).
+    first_alone = min_lanes == 1
+    p0 = 1 if first_alone else 0
     n_walls = 2 * len(WALL_STRETCHES)
     cone_chunks = -(-detours // k) if detours else 0
     chunks = cone_chunks + (-(-n_walls // k) if walls else 0)
-    phases = 1 + chunks * detour_rounds
+    phases = p0 + 1 + chunks * detour_rounds
 
     def walls_of(c, m_, a, b):  # padded to whole chunks with unused corridors
         corridor, n, fits = _wall_flips(smesh, c, m_, a, b)
@@ -978,20 +1058,33 @@ def exact_solve(
         return corridor, n, status0.astype(jnp.int32)
 
     def phase(p, carry):
-        win, alt, expanded, found, outgrew, converged, first_status, pending = carry
-        j = (p - 1) % max(chunks, 1)
+        win, alt, expanded, found, outgrew, converged, first_status, keys, pending = (
+            carry
+        )
+        won, grew_keys = keys
+        starting = p <= p0
+        if first_alone:  # phase 0: the first slot; then the others, if open
+            open_ = ~(found & _settled(win.length))
+            more = jnp.where(starting & jnp.any(open_), k, 1)
+            built = starts_of(
+                jnp.where(p == 0, 0, 1), jnp.where(p == 0, 1, more), open_
+            )
+        else:
+            built = starts_of(0, jnp.where(p == 0, k, 0), jnp.ones(n_pairs, bool))
+        q = p - p0  # the detour phases: 1, 2, …
+        j = (q - 1) % max(chunks, 1)
         if chunks:
             # detour from the best path, or where its detours were tried already
             # (no detour of them was shorter), from the runner-up: two locally
             # shortest paths may differ at two cone vertices, neither of whose
             # single detours is shorter than the best
-            rnd = (p - 1) // chunks
+            rnd = (q - 1) // chunks
             both = jax.tree.map(lambda x, y: jnp.stack([x, y], axis=1), win, alt)
             fresh = jnp.stack(
                 [~_seen(win.length, expanded), jnp.ones(n_pairs, bool)], 1
             )
             src, src_fresh = _shortest(both, fresh)  # (win if neither qualifies)
-            start_round = (p >= 1) & (j == 0)
+            start_round = (q >= 1) & (j == 0)
             pending = jax.lax.cond(
                 start_round, lambda: detours_of(src, src_fresh), lambda: pending
             )
@@ -1007,9 +1100,9 @@ def exact_solve(
             pending,
         )
         corridor, n, status0 = jax.tree.map(
-            lambda a, b: jnp.where(p == 0, a, b), starts, part
+            lambda a, b: jnp.where(starting, a, b), built[0], part
         )
-        lane_key = jnp.where(p == 0, key, -1)
+        lane_key = jnp.where(starting, built[1], -1)
         lanes = _refine(
             smesh,
             theta,
@@ -1023,11 +1116,18 @@ def exact_solve(
             lane_key,
             n_keys,
             min_lanes,
+            systole,
+            won,
         )
         # a lane that outgrew the capacity matters unless a lane of its key
-        # converged: that is the path it would have reached (`jaxgeo._curvature`)
-        moot = _of_won_key(lane_key, _won(lanes, lane_key, n_keys))
-        grew = ((lanes.status == Status.MAX_STEPS) & ~moot).reshape(n_pairs, k)
+        # converged, in this phase or a later one: that is the path it would
+        # have reached (`jaxgeo._curvature`; or its pair is certified by the
+        # systole: it is no shorter). Keyed lanes are counted at the end.
+        won = won | _won(lanes, lane_key, n_keys, systole)
+        grew = lanes.status == Status.MAX_STEPS
+        keyed = jnp.where(grew & (lane_key >= 0), lane_key, n_keys)
+        grew_keys = grew_keys.at[keyed].set(True, mode="drop")
+        grew = (grew & (lane_key < 0)).reshape(n_pairs, k)
         lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
         ok = jnp.any(lanes.status == Status.SUCCESS, axis=1)
         every = jax.tree.map(
@@ -1053,8 +1153,9 @@ def exact_solve(
             expanded,
             found | ok,
             outgrew | jnp.any(grew, axis=1),
-            jnp.where(p == 0, jnp.sum(good, axis=1, dtype=jnp.int32), converged),
+            converged + jnp.where(starting, jnp.sum(good, axis=1, dtype=jnp.int32), 0),
             jnp.where(p == 0, lanes.status[:, 0], first_status),
+            (won, grew_keys),
             pending,
         )
 
@@ -1085,13 +1186,17 @@ def exact_solve(
         no,
         jnp.zeros(n_pairs, jnp.int32),
         no.astype(jnp.int32),
+        (jnp.zeros(n_keys, bool), jnp.zeros(n_keys, bool)),
     )
     # (no detour phase at all where no pair takes detours)
-    n_phases = jnp.where(jnp.all(no_detours), 1, phases)
-    win, _, _, found, outgrew, converged, first_status, _ = jax.lax.fori_loop(
+    n_phases = jnp.where(jnp.all(no_detours), p0 + 1, phases)
+    win, _, _, found, outgrew, converged, first_status, keys, _ = jax.lax.fori_loop(
         0, n_phases, phase, init + (pending,)
     )
+    won, grew_keys = keys
+    outgrew = outgrew | jnp.any((grew_keys & ~won).reshape(n_pairs, -1), axis=1)
     status = jnp.where(found, Status.SUCCESS, first_status)
+    certified = found & _settled(win.length)
     stats = ExactStats(
         iterations=win.iterations,
         flips=win.flips,
@@ -1099,8 +1204,8 @@ def exact_solve(
         starts_converged=converged,
         corridor_length=win.n,
         # (a certified pair's path is the shortest whichever lanes outgrew)
-        outgrew=(outgrew & ~(certified & found)).astype(jnp.int32),
-        certified=(certified & found).astype(jnp.int32),
+        outgrew=(outgrew & ~certified).astype(jnp.int32),
+        certified=certified.astype(jnp.int32),
     )
     # (pyright misreads *args of unknown length followed by more arguments)
     return jax.vmap(lambda *a: _finish(mesh, *a, max_points))(  # pyright: ignore[reportCallIssue]

@@ -87,12 +87,13 @@ class Path(eqx.Module):
       `Solution.stats`): for `"exact"` the flip rounds (`iterations`) and `flips`
       of the winning start, `starts` refined and `starts_converged`, the final
       `corridor_length` in faces, `outgrew` (a corridor outgrew its capacity)
-      and `certified` (1: globally shortest, on a disc with no cone vertex, see
-      `jaxgeo.exact`); for `"laser"` the `branch_points`; for
-      `"smooth"` the exact method's, and of the smooth solve the strip
-      `repair_rounds` and `releases`, whether the Newton solve `converged`, its
-      final projected `grad_norm` and its `newton_iterations` (meaningless in a
-      row whose exact path failed: its status says so).
+      and `certified` (1: globally shortest, on a disc with no cone vertex or
+      an annulus with none at most half its systole, see `jaxgeo.exact`); for
+      `"laser"` the `branch_points`; for `"smooth"` the exact method's, and of
+      the smooth solve the strip `repair_rounds` and `releases`, whether the
+      Newton solve `converged`, its final projected `grad_norm` and its
+      `newton_iterations` (meaningless in a row whose exact path failed: its
+      status says so).
     - `start`, `end`: the two endpoints as `SurfacePoint`s (face and barycentric
       coordinates; leading axes B in a batch), as located from what was given:
       `start.position(mesh)` is `points[0]` and `end.position(mesh)` is
