@@ -962,7 +962,7 @@ def exact_solve(
     # (a cone-free annulus's path at most half its systole is the shortest)
     systole = jnp.where(annulus, smesh.component_systole[component], 0)
 
-    def _settled(length):  # a converged path of `length` is globally shortest
+    def settled(length):  # a converged path of `length` is globally shortest
         return disc | (annulus & _certified_by_systole(length, systole))
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
@@ -984,6 +984,7 @@ def exact_solve(
         def one_slot(j, built):
             (corridor, n, status0), key = built
             one = jnp.arange(n_pairs)
+            # (pyright misreads *args of unknown length followed by more arguments)
             c, m, st = jax.vmap(lambda *x: _start(smesh, angles, *x, cap))(  # pyright: ignore[reportCallIssue]
                 slots[:, j], slot_ok[:, j] & open_, vs, vt, ss, ts
             )
@@ -1008,7 +1009,7 @@ def exact_solve(
     # and compiled once instead of once per phase (a third of the compile time).
     # With `min_lanes` 1 (meshes with no cone vertex, `POOL_MIN_CONE_FREE`) a
     # phase before it refines the first start of every pair alone, and phase 0
-    # the others of the pairs it did not settle (certified, `_settled`): most
+    # the others of the pairs it did not settle (certified, `settled`): most
     # single paths then build one start rather than k (20k catenoid: 0.6 ms
     # against 1.9, and the refinement of the other starts' corridors).
     first_alone = min_lanes == 1
@@ -1064,7 +1065,7 @@ def exact_solve(
         won, grew_keys = keys
         starting = p <= p0
         if first_alone:  # phase 0: the first slot; then the others, if open
-            open_ = ~(found & _settled(win.length))
+            open_ = ~(found & settled(win.length))
             more = jnp.where(starting & jnp.any(open_), k, 1)
             built = starts_of(
                 jnp.where(p == 0, 0, 1), jnp.where(p == 0, 1, more), open_
@@ -1196,7 +1197,7 @@ def exact_solve(
     won, grew_keys = keys
     outgrew = outgrew | jnp.any((grew_keys & ~won).reshape(n_pairs, -1), axis=1)
     status = jnp.where(found, Status.SUCCESS, first_status)
-    certified = found & _settled(win.length)
+    certified = found & settled(win.length)
     stats = ExactStats(
         iterations=win.iterations,
         flips=win.flips,

@@ -43,7 +43,9 @@ class Exact(eqx.Module):
     The default method. `corridor_capacity`: faces a corridor may hold (None:
     `max_points`; `shortest_path` then tries 256 first, `shortest_paths` 256
     and 512, see `first_attempts`). `min_lanes`: the flip loop's lanes at least
-    (None: 1 on a concrete mesh with no cone vertex, else 4; see `for_mesh`)."""
+    (None: 1 on a concrete mesh with no cone vertex, else 4; see `for_mesh`); with
+    1, every pair's first start is built and refined alone, and its others only
+    if that did not settle it (`jaxgeo.exact`, "Certificate")."""
 
     max_starts: int = 8
     max_iterations: int | None = None  # None: the corridor capacity, >= 256
