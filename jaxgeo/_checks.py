@@ -53,15 +53,28 @@ def _check_int(name: str, value: Any, low: int) -> None:
         raise JaxgeoError(f"{name} must be at least {low}, got {value}")
 
 
+def _no_vertices() -> None:
+    return None
+
+
+#: The vertex array `check_mesh_vertices` last found good (a weak reference):
+#: `shortest_path` in a loop over one mesh checks it once, not per call.
+_checked_vertices: Callable[[], Any] = _no_vertices
+
+
 def check_mesh_vertices(mesh) -> None:
     """The vertex array of a concrete mesh is float32/float64 and finite.
 
     `Mesh(...)` validates its input, but `Mesh.with_vertices` does not (it must
     accept tracers), so a NaN or a wrong dtype can reach the solver that way; a NaN
     vertex would otherwise give NaN crossings or a wrong nearest face."""
+    global _checked_vertices
     v = mesh.vertices
     if is_traced(v):
         return
+    if _checked_vertices() is v:  # (the last array checked: a loop over paths)
+        return
+    array = v
     v = np.asarray(v)
     if v.dtype not in (np.float32, np.float64):
         raise JaxgeoError(
@@ -75,6 +88,8 @@ def check_mesh_vertices(mesh) -> None:
             f"{np.flatnonzero(bad)[:10].tolist()} (Mesh.with_vertices does not "
             "re-validate)"
         )
+    if isinstance(array, jax.Array):  # (immutable: its check stays true)
+        _checked_vertices = weakref.ref(array)
 
 
 def check_arguments(
@@ -149,9 +164,27 @@ def as_endpoint(p: Any, mesh) -> Any:
             jnp.asarray(p.face, jnp.int32), jnp.asarray(p.bary, mesh.vertices.dtype)
         )
     if is_vertex_index(p):
-        i = jnp.asarray(p, jnp.int32)
-        return i if is_traced(p) else SurfacePoint.vertex(mesh, i)
+        if is_traced(p):
+            return jnp.asarray(p, jnp.int32)
+        if is_traced((mesh.faces, mesh.vertex_faces)):
+            return SurfacePoint.vertex(mesh, jnp.asarray(p, jnp.int32))
+        return _vertex_point(mesh, int(p))
     return jnp.asarray(p, mesh.vertices.dtype)
+
+
+def _vertex_point(mesh, i: int) -> SurfacePoint:
+    """`SurfacePoint.vertex(mesh, i)` for a concrete mesh and index, in numpy (the
+    host copies of the tables are cached by JAX): a fifth of a single path's
+    fixed cost was its two endpoints' dispatches."""
+    vertex_faces, faces = np.asarray(mesh.vertex_faces), np.asarray(mesh.faces)
+    dtype = np.dtype(mesh.vertices.dtype)
+    ok = 0 <= i < vertex_faces.shape[0] and vertex_faces[i, 0] >= 0
+    if not ok:  # (as `SurfacePoint.vertex`: face 0, NaN; `check_point` refuses it)
+        return SurfacePoint(np.int32(0), np.full(3, np.nan, dtype))
+    face = vertex_faces[i, 0]
+    bary = np.zeros(3, dtype)
+    bary[np.argmax(faces[face] == i)] = 1
+    return SurfacePoint(np.int32(face), bary)
 
 
 def check_vertex_indices(name: str, idx: np.ndarray, mesh) -> None:

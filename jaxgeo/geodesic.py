@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from typing import Literal
 
@@ -137,7 +138,9 @@ def checked_method(
     return for_mesh(m, mesh), int(max_points)
 
 
-@eqx.filter_jit
+# (`jax.jit`, not `eqx.filter_jit`: every argument but the static ones is a pytree
+# of arrays, and equinox's partition of the mesh's fields cost 0.3 ms a call)
+@functools.partial(jax.jit, static_argnames=("method", "max_points", "differentiable"))
 def _solve_one(mesh, p1, p2, max_distance, method, max_points, differentiable):
     start, d1 = as_surface_point(mesh, p1)
     end, d2 = as_surface_point(mesh, p2)

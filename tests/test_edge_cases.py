@@ -212,6 +212,7 @@ def test_with_vertices_bad_values_raise_at_use():
     bad vertex array is caught when the mesh is used."""
     v = V(FLAT).copy()
     v[3] = np.nan
+    jg.shortest_path(FLAT, A, B)  # (checked good and remembered: not the new array)
     with pytest.raises(jg.JaxgeoError, match=r"NaN or infinite .* vertices \[3\]"):
         jg.shortest_path(FLAT.with_vertices(jnp.asarray(v)), A, B)
     with pytest.raises(jg.JaxgeoError, match="float32 or float64"):

@@ -249,3 +249,21 @@ def test_path_nodes_as_surface_points(method):
         one = path.surface_points(MESH)
         np.testing.assert_array_equal(rows.face[r], one.face)
         np.testing.assert_array_equal(rows.bary[r], one.bary)
+
+
+def test_a_vertex_index_endpoint_is_its_vertex_surface_point():
+    """`shortest_path` turns a concrete vertex index into a point in numpy
+    (`_checks.as_endpoint`, no dispatch): the face, coordinates and dtype of
+    `SurfacePoint.vertex`, for every vertex, in float64 and float32."""
+    import jax
+
+    from jaxgeo._checks import as_endpoint
+
+    for mesh in (MESH, jg.Mesh(np.asarray(MESH.vertices, np.float32), MESH.faces)):
+        ids = np.arange(mesh.n_vertices)
+        want = jax.vmap(lambda i, m=mesh: jg.SurfacePoint.vertex(m, i))(ids)
+        got = [as_endpoint(int(i), mesh) for i in ids]
+        assert [int(p.face) for p in got] == np.asarray(want.face).tolist()
+        bary = np.stack([p.bary for p in got])
+        assert bary.dtype == mesh.vertices.dtype
+        np.testing.assert_array_equal(bary, want.bary)
