@@ -748,17 +748,10 @@ def _refine(
         wanted_left = nth[-1] > jnp.sum(out, dtype=jnp.int32)
         return new_task, jnp.where(wanted_left, handed, live)
 
-    def body(state):
-        lane, task, next_, results = state
-        s_w, t_w = ends(task)
-        lane = _round(mesh, theta, lane, s_w, t_w, tol)
-        # (a pair may have won in this round's lanes or in an earlier result)
-        earlier = _won(results, key, n_keys, systole) | won_before
-        lane = _settle(
-            lane, key[jnp.minimum(task, tasks - 1)], n_keys, earlier, systole
-        )
-        out = finished(lane)
-        # write what finished, then hand out the next starts in worker order
+    def swap(state, out):
+        """Write the finished lanes' results, then hand out the next starts in
+        worker order; and the keys won so far."""
+        lane, task, next_, results, _ = state
         results = write(results, lane, task)
         won = _won(results, key, n_keys, systole) | won_before
         new_task, next_ = hand_out(won, next_, out)
@@ -768,7 +761,19 @@ def _refine(
             load(task),
             lane,
         )
-        return lane, task, next_, results
+        return lane, task, next_, results, won
+
+    def body(state):
+        lane, task, next_, results, won = state
+        s_w, t_w = ends(task)
+        lane = _round(mesh, theta, lane, s_w, t_w, tol)
+        # (a pair may have won in this round's lanes or in an earlier result)
+        lane = _settle(lane, key[jnp.minimum(task, tasks - 1)], n_keys, won, systole)
+        out = finished(lane)
+        state = (lane, task, next_, results, won)
+        # (most rounds finish no lane: the pool's books are then left as they
+        # are, 10 % of a long single path's rounds on the 20k catenoid)
+        return jax.lax.cond(jnp.any(out), swap, lambda st, _: st, state, out)
 
     # The loops of a narrowing pool, W, W/POOL_SHRINK, …: the slowest starts
     # take three times the mean number of rounds, and one loop over all W
@@ -780,21 +785,22 @@ def _refine(
     none_won = jnp.zeros(n_keys, bool) | won_before
     task, next_ = hand_out(none_won, 0, jnp.ones(workers, bool))
     results = _fresh(corridor, n, status0, dtype)
-    state = (load(task), task, next_, results)
+    state = (load(task), task, next_, results, none_won)
     for smaller in widths[1:] + [0]:
 
         def cond(state, smaller=smaller):
-            lane, _, next_, _ = state
+            lane, _, next_, _, _ = state
             running = jnp.sum(~finished(lane))
             return (running > smaller) | (next_ < live)
 
-        lane, task, next_, results = jax.lax.while_loop(cond, body, state)
+        lane, task, next_, results, won = jax.lax.while_loop(cond, body, state)
         if smaller:  # keep the running lanes (finished ones: written, or none)
             results = write(results, lane, task)
             keep = jnp.argsort(finished(lane), stable=True)[:smaller]
             lane, task = jax.tree.map(lambda x, k=keep: x[k], (lane, task))
             task = jnp.where(finished(lane), tasks, task)
-        state = (lane, task, next_, results)
+            won = _won(results, key, n_keys, systole) | won_before
+        state = (lane, task, next_, results, won)
     # the starts never handed out, their key having converged, are settled
     return _settle(state[3], key, n_keys, won_before, systole)
 
@@ -1189,11 +1195,19 @@ def exact_solve(
         no.astype(jnp.int32),
         (jnp.zeros(n_keys, bool), jnp.zeros(n_keys, bool)),
     )
-    # (no detour phase at all where no pair takes detours)
+    # (no detour phase at all where no pair takes detours, and no phase once
+    # every pair is settled: a cone-free pair's first start alone, mostly)
     n_phases = jnp.where(jnp.all(no_detours), p0 + 1, phases)
-    win, _, _, found, outgrew, converged, first_status, keys, _ = jax.lax.fori_loop(
-        0, n_phases, phase, init + (pending,)
+
+    def more(state):
+        p, carry = state
+        win, found = carry[0], carry[3]
+        return (p < n_phases) & ~jnp.all(found & settled(win.length))
+
+    _, carry = jax.lax.while_loop(
+        more, lambda st: (st[0] + 1, phase(*st)), (0, init + (pending,))
     )
+    win, _, _, found, outgrew, converged, first_status, keys, _ = carry
     won, grew_keys = keys
     outgrew = outgrew | jnp.any((grew_keys & ~won).reshape(n_pairs, -1), axis=1)
     status = jnp.where(found, Status.SUCCESS, first_status)
