@@ -21,6 +21,7 @@ from ._checks import (
     is_vertex_index,
 )
 from ._errors import JaxgeoError
+from ._padding import padded
 from .locate import DEFAULT_MAX_DISTANCE, SurfacePoint, locate, vertex_valid
 from .mesh import Mesh
 from .methods import (
@@ -204,11 +205,16 @@ def shortest_path(
         check_point("p2", p2, mesh)
     p1, p2 = as_endpoint(p1, mesh), as_endpoint(p2, mesh)
     args = (
-        mesh.padded(),  # padded to its size class: compiled once per class
+        # padded to its size class: compiled once per class (`padded(mesh)`, not
+        # `mesh.padded()`: an equinox bound method costs ~25 µs to create)
+        padded(mesh),
         p1,
         p2,
-        # an array, not a static float: a new value must not recompile
-        jnp.asarray(max_distance, mesh.vertices.dtype),
+        # an array, not a static float: a new value must not recompile (numpy
+        # where concrete: the call transfers it, without a dispatch of its own)
+        jnp.asarray(max_distance, mesh.vertices.dtype)
+        if is_traced(max_distance)
+        else np.asarray(max_distance, mesh.vertices.dtype),
     )
     # one cheaper attempt (256 faces): each further size would be one more
     # program to compile per size class and method for the few single paths

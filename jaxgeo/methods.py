@@ -9,6 +9,7 @@ API calls it with a batch of one, `shortest_paths` with a chunk.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Literal
 
 import equinox as eqx
@@ -190,14 +191,13 @@ def first_attempts(method: AnyMethod, max_points: int) -> list[AnyMethod]:
     compile per size class."""
     if isinstance(method, Exact) and method.corridor_capacity is None:
         return [
-            dataclasses.replace(method, corridor_capacity=c)
+            _replace(method, corridor_capacity=c)
             for c in FIRST_CAPACITIES
             if c < max_points
         ]
     if isinstance(method, Smooth):
         return [
-            dataclasses.replace(method, exact=e)
-            for e in first_attempts(method.exact, max_points)
+            _replace(method, exact=e) for e in first_attempts(method.exact, max_points)
         ]
     return []
 
@@ -208,15 +208,27 @@ def for_mesh(method: AnyMethod, mesh: Mesh) -> AnyMethod:
     (`exact.POOL_MIN_CONE_FREE`; a static choice, so one program per mesh, not
     one per branch). A traced mesh keeps the defaults."""
     if isinstance(method, Smooth):
-        return dataclasses.replace(method, exact=for_mesh(method.exact, mesh))
+        return _replace(method, exact=for_mesh(method.exact, mesh))
     if not isinstance(method, Exact) or method.min_lanes is not None:
         return method
     if is_traced(mesh.component_cone_free):  # (`Mesh.with_vertices` under jit)
         return method
     cone_free = bool(np.all(np.asarray(mesh.component_cone_free)))
-    return dataclasses.replace(
-        method, min_lanes=POOL_MIN_CONE_FREE if cone_free else None
-    )
+    return _replace(method, min_lanes=POOL_MIN_CONE_FREE if cone_free else None)
+
+
+def _replace(method: AnyMethod, **changes) -> AnyMethod:
+    """`dataclasses.replace(method, **changes)`, remembered: building a module
+    costs ~50 µs, and `shortest_path` derives its method on every call."""
+    try:
+        return _replaced(method, tuple(sorted(changes.items())))
+    except TypeError:  # (an unhashable option)
+        return dataclasses.replace(method, **changes)
+
+
+@functools.lru_cache(maxsize=256)
+def _replaced(method: AnyMethod, changes: tuple) -> AnyMethod:
+    return dataclasses.replace(method, **dict(changes))
 
 
 Method = Literal["exact", "laser", "smooth"] | AnyMethod
@@ -243,9 +255,21 @@ def as_method(method: Method, **legacy) -> AnyMethod:
             f"unknown method {method!r}; expected one of {METHODS} or a "
             "jaxgeo.Exact/Laser/Smooth object"
         )
-    cls = _BY_NAME[method]
+    try:  # (remembered, as `_replace`)
+        return _named_cached(method, tuple(sorted(legacy.items())))
+    except TypeError:  # (an unhashable option: the checks name it)
+        return _named(method, tuple(legacy.items()))
+
+
+@functools.lru_cache(maxsize=64)
+def _named_cached(name: str, legacy: tuple) -> AnyMethod:
+    return _named(name, legacy)
+
+
+def _named(name: str, legacy: tuple) -> AnyMethod:
+    cls = _BY_NAME[name]
     fields = {f for f in cls.__dataclass_fields__}
-    return cls(**{k: v for k, v in legacy.items() if k in fields and v is not None})
+    return cls(**{k: v for k, v in legacy if k in fields and v is not None})
 
 
 def initial_status(

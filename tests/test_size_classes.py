@@ -151,7 +151,7 @@ def test_a_second_mesh_of_a_class_does_not_compile(caplog):
         jg.shortest_paths(mesh, v[:5], v[40:45], chunk_size=4, max_points=POINTS)
 
     run(a)
-    sizes = _solve_one._cached._cache_size(), _solve_chunk._cached._cache_size()
+    sizes = _solve_one._cache_size(), _solve_chunk._cached._cache_size()
     with jax.log_compiles(True), caplog.at_level(logging.WARNING):
         caplog.clear()
         run(b)
@@ -160,7 +160,7 @@ def test_a_second_mesh_of_a_class_does_not_compile(caplog):
     ]
     assert not compiles, compiles
     assert (
-        _solve_one._cached._cache_size(),
+        _solve_one._cache_size(),
         _solve_chunk._cached._cache_size(),
     ) == sizes
 
