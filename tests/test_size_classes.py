@@ -194,6 +194,24 @@ def test_padding_a_concrete_mesh_inside_a_jit_caches_no_tracer():
     assert float(jnp.sum(outside.faces)) == inside
 
 
+def test_the_padded_mesh_is_remembered_while_its_mesh_lives():
+    """`shortest_path` pads on every call: the padded mesh of a concrete mesh is
+    built once (`_padding._PADDED`) and dropped when the mesh is collected."""
+    import gc
+
+    from jaxgeo._padding import _PADDED
+
+    tm = trimesh.creation.icosphere(1)
+    mesh = jg.Mesh(tm.vertices, tm.faces)
+    first = mesh.padded()
+    assert mesh.padded() is first
+    key = id(mesh)
+    assert _PADDED[key][1] is first
+    del mesh, first
+    gc.collect()
+    assert key not in _PADDED
+
+
 def _both(mesh, method, pairs):
     """The paths of vertex `pairs` on the padded mesh (the public API) and on the
     real mesh (the jitted solver handed the unpadded arrays). test_exact's
