@@ -53,13 +53,9 @@ def _check_int(name: str, value: Any, low: int) -> None:
         raise JaxgeoError(f"{name} must be at least {low}, got {value}")
 
 
-def _no_vertices() -> None:
-    return None
-
-
 #: The vertex array `check_mesh_vertices` last found good (a weak reference):
 #: `shortest_path` in a loop over one mesh checks it once, not per call.
-_checked_vertices: Callable[[], Any] = _no_vertices
+_checked_vertices: weakref.ref | None = None
 
 
 def check_mesh_vertices(mesh) -> None:
@@ -72,24 +68,23 @@ def check_mesh_vertices(mesh) -> None:
     v = mesh.vertices
     if is_traced(v):
         return
-    if _checked_vertices() is v:  # (the last array checked: a loop over paths)
-        return
-    array = v
-    v = np.asarray(v)
-    if v.dtype not in (np.float32, np.float64):
+    if _checked_vertices is not None and _checked_vertices() is v:
+        return  # (the last array checked: a loop over paths)
+    a = np.asarray(v)
+    if a.dtype not in (np.float32, np.float64):
         raise JaxgeoError(
-            f"mesh.vertices must be float32 or float64, got dtype {v.dtype} (set "
+            f"mesh.vertices must be float32 or float64, got dtype {a.dtype} (set "
             "with Mesh.with_vertices?)"
         )
-    bad = ~np.isfinite(v).all(axis=1)
+    bad = ~np.isfinite(a).all(axis=1)
     if bad.any():
         raise JaxgeoError(
             "mesh.vertices has NaN or infinite coordinates at vertices "
             f"{np.flatnonzero(bad)[:10].tolist()} (Mesh.with_vertices does not "
             "re-validate)"
         )
-    if isinstance(array, jax.Array):  # (immutable: its check stays true)
-        _checked_vertices = weakref.ref(array)
+    if isinstance(v, jax.Array):  # (immutable: its check stays true)
+        _checked_vertices = weakref.ref(v)
 
 
 def check_arguments(

@@ -799,7 +799,6 @@ def _refine(
             keep = jnp.argsort(finished(lane), stable=True)[:smaller]
             lane, task = jax.tree.map(lambda x, k=keep: x[k], (lane, task))
             task = jnp.where(finished(lane), tasks, task)
-            won = _won(results, key, n_keys, systole) | won_before
         state = (lane, task, next_, results, won)
     # the starts never handed out, their key having converged, are settled
     return _settle(state[3], key, n_keys, won_before, systole)
