@@ -67,11 +67,12 @@ def cone_free(face_component, fan_faces, fan_size, fan_closed, theta, tol: float
     return _segment_sum(cone.astype(np.int32), labels, n) == 0
 
 
-def discs_and_annuli(face_component, fan_faces, fan_size, edge_faces, edge_cut):
+def discs_and_annuli(face_component, vertex_labels, edge_faces, edge_cut):
     """Per component label (< F): whether it is a disc (Euler characteristic
     V − E + F = 1; 2, a sphere, cannot be cone-free) and whether it is an
-    annulus with a cut (characteristic 0, cut edges: `jaxgeo._cuts`). Numpy
-    only: the connectivity does not change with the vertices."""
+    annulus with a cut (characteristic 0, cut edges: `jaxgeo._cuts`);
+    `vertex_labels`: `vertex_component`'s. Numpy only: the connectivity does
+    not change with the vertices."""
     n = face_component.shape[0]
     e_face = edge_faces[:, 0]
     e_comp = np.where(e_face >= 0, face_component[np.maximum(e_face, 0)], -1)
@@ -80,7 +81,6 @@ def discs_and_annuli(face_component, fan_faces, fan_size, edge_faces, edge_cut):
         w = np.ones(labels.shape[0], np.int32) if weight is None else weight
         return _segment_sum(w, labels, n).astype(np.int32)
 
-    v_comp = vertex_component(face_component, fan_faces, fan_size)
-    euler = count(v_comp) - count(e_comp) + count(face_component)
+    euler = count(vertex_labels) - count(e_comp) + count(face_component)
     cut = count(e_comp, (edge_cut != 0).astype(np.int32))
     return euler == 1, (euler == 0) & (cut > 0)

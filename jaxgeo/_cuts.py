@@ -44,9 +44,19 @@ from scipy.spatial import cKDTree
 SYSTOLE_CUTS = 8
 
 
-def _annuli(edges, edge_faces, face_component, vertex_component, n_v: int):
+Annulus = tuple[int, np.ndarray, np.ndarray]
+
+
+def annuli(
+    edges: np.ndarray,
+    edge_faces: np.ndarray,
+    face_component: np.ndarray,
+    vertex_component: np.ndarray,
+) -> list[Annulus]:
     """The annuli of a mesh: (component, vertices of one boundary loop, of the
-    other) per component of Euler characteristic 0 with two boundary loops."""
+    other) per component of Euler characteristic 0 with two boundary loops;
+    `vertex_component`: −1 for a vertex in no face."""
+    n_v = vertex_component.shape[0]
     on_boundary = edge_faces[:, 1] < 0
     if not on_boundary.any():
         return []
@@ -106,22 +116,20 @@ def annulus_cuts(
     faces: np.ndarray,
     edges: np.ndarray,
     edge_faces: np.ndarray,
-    face_component: np.ndarray,
-    vertex_component: np.ndarray,
+    rings: list[Annulus],
 ) -> np.ndarray:
-    """`edge_cut (E,)` int32 (see the module docstring); `vertex_component`: −1
-    for a vertex in no face."""
+    """`edge_cut (E,)` int32 (see the module docstring) of the annuli `rings`
+    (`annuli`)."""
     n_v, n_e = vertices.shape[0], edges.shape[0]
     cut = np.zeros(n_e, np.int32)
-    annuli = _annuli(edges, edge_faces, face_component, vertex_component, n_v)
-    if not annuli:
+    if not rings:
         return cut
     everything = _edge_graph(vertices, edges)
     key = np.minimum(edges[:, 0], edges[:, 1]) * n_v + np.maximum(
         edges[:, 0], edges[:, 1]
     )
     order = np.argsort(key)
-    for _, source, target in annuli:
+    for _, source, target in rings:
         dist, pred, _ = dijkstra(
             everything, indices=source, min_only=True, return_predecessors=True
         )
@@ -151,15 +159,12 @@ def _spread(points: np.ndarray, k: int) -> np.ndarray:
 
 
 def annulus_systoles(
-    vertices: np.ndarray,
-    edges: np.ndarray,
-    edge_faces: np.ndarray,
-    face_component: np.ndarray,
-    vertex_component: np.ndarray,
+    vertices: np.ndarray, edges: np.ndarray, rings: list[Annulus], n_labels: int
 ) -> np.ndarray:
-    """Per component label (`(F,)`, as `face_component`'s), a lower bound of the
-    length of every closed curve winding round the component where it is an
-    annulus (see the module docstring), 0 elsewhere.
+    """Per component label (`(n_labels,)`, F as `face_component`'s), a lower
+    bound of the length of every closed curve winding round the component where
+    it is one of the annuli `rings` (`annuli`; see the module docstring), 0
+    elsewhere.
 
     K = `SYSTOLE_CUTS` edge paths join the two boundary loops: the graph's
     shortest paths from K vertices spread along the shorter loop to the longer
@@ -170,13 +175,11 @@ def annulus_systoles(
     among them a spanning tree: it is at least MST(D) + min D. Paths of the
     graph may merge (ties of its distances), and any subset of them bounds the
     walk too: the bound is the best subset's."""
-    n_v = vertices.shape[0]
-    bound = np.zeros(face_component.shape[0], vertices.dtype)
-    annuli = _annuli(edges, edge_faces, face_component, vertex_component, n_v)
-    if not annuli:
+    bound = np.zeros(n_labels, vertices.dtype)
+    if not rings:
         return bound
     everything = _edge_graph(vertices, edges)
-    for c, one, other in annuli:
+    for c, one, other in rings:
         extent = [np.ptp(vertices[x], axis=0).sum() for x in (one, other)]
         short, long_ = (one, other) if extent[0] <= extent[1] else (other, one)
         k = min(SYSTOLE_CUTS, len(short))

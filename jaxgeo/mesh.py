@@ -25,7 +25,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from scipy.sparse.csgraph import connected_components
 
 from . import _curvature
-from ._cuts import annulus_cuts, annulus_systoles
+from ._cuts import annuli, annulus_cuts, annulus_systoles
 from ._errors import JaxgeoError
 from ._fans import vertex_fans
 from ._landmarks import DEFAULT_LANDMARKS, landmark_forests
@@ -283,7 +283,8 @@ class Mesh(eqx.Module):
         self.landmark_pred_vertex = jnp.asarray(forests["pred_vertex"])
         self.landmark_pred_edge = jnp.asarray(forests["pred_edge"])
         self.landmark_dist = jnp.asarray(forests["dist_vertex"])
-        cuts = annulus_cuts(v, f, edges, edge_faces, component, vertex_component)
+        rings = annuli(edges, edge_faces, component, vertex_component)
+        cuts = annulus_cuts(v, f, edges, edge_faces, rings)
         self.edge_cut = jnp.asarray(cuts, jnp.int32)
         angles = corner_angles_host(v, f)
         self.corner_angles = jnp.asarray(angles, v.dtype)
@@ -294,13 +295,12 @@ class Mesh(eqx.Module):
         self.vertex_angle_sums = jnp.asarray(theta, v.dtype)
         self.component_cone_free = jnp.asarray(free)
         disc, annulus = _curvature.discs_and_annuli(
-            component, fans["fan_faces"], fans["fan_size"], edge_faces, cuts
+            component, vertex_component, edge_faces, cuts
         )
         self.component_disc = jnp.asarray(disc)
         self.component_annulus = jnp.asarray(annulus)
         self.component_systole = jnp.asarray(
-            annulus_systoles(v, edges, edge_faces, component, vertex_component),
-            v.dtype,
+            annulus_systoles(v, edges, rings, f.shape[0]), v.dtype
         )
 
     @property
@@ -376,17 +376,15 @@ class Mesh(eqx.Module):
                 faces, host, tuple(np.asarray(x) for x in fans), vertices.dtype
             )
             angles = jnp.asarray(host, vertices.dtype)
-            component = np.asarray(self.face_component)
+            component, edges = np.asarray(self.face_component), np.asarray(self.edges)
+            labels = np.asarray(
+                _curvature.vertex_component(
+                    component, np.asarray(self.fan_faces), np.asarray(self.fan_size)
+                )
+            )
+            rings = annuli(edges, np.asarray(self.edge_faces), component, labels)
             systole = annulus_systoles(
-                np.asarray(vertices),
-                np.asarray(self.edges),
-                np.asarray(self.edge_faces),
-                component,
-                np.asarray(
-                    _curvature.vertex_component(
-                        component, np.asarray(self.fan_faces), np.asarray(self.fan_size)
-                    )
-                ),
+                np.asarray(vertices), edges, rings, component.shape[0]
             )
         return eqx.tree_at(
             lambda m: (
