@@ -35,9 +35,8 @@ class Exact(eqx.Module):
     corridors round the other side of the best path's nearest cone vertices and,
     with `walls`, 8 corridors moved across a stretch of one of its walls
     (`detour_rounds` times); the shortest kept. Where the mesh has no cone vertex
-    (anticlastic membranes) the detours are skipped (on a concrete mesh not even
-    compiled: `for_mesh`) and a start stops once another of its class has
-    converged, exactly (`jaxgeo.exact`, "Certificate").
+    (anticlastic membranes) the detours are skipped and a start stops once
+    another of its class has converged, exactly (`jaxgeo.exact`, "Certificate").
     Length and points differentiable.
     `max_starts=4` is ~1.4x faster per single path on a scan (`bone.ply`, README),
     and `walls=False, detour_rounds=1` ~1.8x more; both miss the shortest path
@@ -205,11 +204,9 @@ def first_attempts(method: AnyMethod, max_points: int) -> list[AnyMethod]:
 
 def for_mesh(method: AnyMethod, mesh: Mesh) -> AnyMethod:
     """`method` with the options it leaves to the mesh set, where the mesh is
-    concrete: on a mesh with no cone vertex the exact engine's `min_lanes` is 1
-    (`exact.POOL_MIN_CONE_FREE`) and it takes no detours (they stay in their
-    homotopy class, which holds one locally shortest path there: the engine
-    skips them anyway, and so need not compile them). A static choice, so one
-    program per mesh, not one per branch. A traced mesh keeps the defaults."""
+    concrete: the exact engine's `min_lanes` is 1 on a mesh with no cone vertex
+    (`exact.POOL_MIN_CONE_FREE`; a static choice, so one program per mesh, not
+    one per branch). A traced mesh keeps the defaults."""
     if isinstance(method, Smooth):
         return _replace(method, exact=for_mesh(method.exact, mesh))
     if not isinstance(method, Exact) or method.min_lanes is not None:
@@ -217,9 +214,7 @@ def for_mesh(method: AnyMethod, mesh: Mesh) -> AnyMethod:
     if is_traced(mesh.component_cone_free):  # (`Mesh.with_vertices` under jit)
         return method
     cone_free = bool(np.all(np.asarray(mesh.component_cone_free)))
-    if not cone_free:
-        return method
-    return _replace(method, min_lanes=POOL_MIN_CONE_FREE, detours=0, walls=False)
+    return _replace(method, min_lanes=POOL_MIN_CONE_FREE if cone_free else None)
 
 
 def _replace(method: AnyMethod, **changes) -> AnyMethod:

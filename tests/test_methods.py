@@ -113,19 +113,16 @@ def test_smooth_is_closer_to_the_analytic_catenoid_than_exact():
 
 def test_for_mesh_runs_one_lane_on_a_mesh_with_no_cone_vertex():
     """On a concrete cone-free mesh the exact engine's flip loop runs one lane
-    (its first converged start settles the others of its class) and takes no
-    detours (they stay in their class); elsewhere, on a traced mesh, and where
-    the caller chose, the options stay."""
+    (its first converged start settles the others of its class); elsewhere, on
+    a traced mesh, and where the caller chose, the options stay."""
     from jaxgeo.exact import POOL_MIN_CONE_FREE
     from jaxgeo.methods import for_mesh
 
     cone_free = catenoid()
     with_cones = jg.Mesh(*surfaces.icosphere(2))
-    chosen = for_mesh(jg.Exact(), cone_free)
-    assert chosen.min_lanes == POOL_MIN_CONE_FREE == 1
-    assert (chosen.detours, chosen.walls) == (0, False)
+    assert for_mesh(jg.Exact(), cone_free).min_lanes == POOL_MIN_CONE_FREE == 1
     assert for_mesh(jg.Smooth(), cone_free).exact.min_lanes == 1
-    assert for_mesh(jg.Exact(), with_cones) == jg.Exact()
+    assert for_mesh(jg.Exact(), with_cones).min_lanes is None
     assert for_mesh(jg.Exact(min_lanes=3), cone_free).min_lanes == 3
     assert for_mesh(jg.Laser(), cone_free) == jg.Laser()
     seen = []
@@ -139,19 +136,15 @@ def test_for_mesh_runs_one_lane_on_a_mesh_with_no_cone_vertex():
     assert seen == [None]
 
 
-@pytest.mark.slow  # five compiles of the exact path (~60 s)
+@pytest.mark.slow  # four compiles of the exact path (~50 s)
 def test_one_lane_and_four_give_the_same_paths():
     """`min_lanes` changes how many starts run at once, not the path: on the
     catenoid (no cone vertex) the lengths at 1 and 4 lanes agree to rounding
     (the same corridor, unfolded in lanes of another width: 1e-12). One lane
     refines every pair's first start alone, and its other starts only where
     that did not settle the pair: on a mesh with cones (an icosphere), always,
-    and the detours after them, as four lanes do. The default on the catenoid
-    (one lane, and no detours compiled: `for_mesh`) gives the same paths."""
-    for mesh, cone_free in (
-        (catenoid(), True),
-        (jg.Mesh(*surfaces.icosphere(2)), False),
-    ):
+    and the detours after them, as four lanes do."""
+    for mesh in (catenoid(), jg.Mesh(*surfaces.icosphere(2))):
         pairs = np.random.default_rng(5).integers(0, mesh.n_vertices, (6, 2))
         pairs = pairs[pairs[:, 0] != pairs[:, 1]]
 
@@ -163,5 +156,3 @@ def test_one_lane_and_four_give_the_same_paths():
             ]
 
         np.testing.assert_allclose(lengths(1), lengths(4), rtol=1e-12)
-        if cone_free:
-            np.testing.assert_allclose(lengths(None), lengths(4), rtol=1e-12)
