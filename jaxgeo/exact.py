@@ -32,8 +32,7 @@ meshes), several locally shortest paths lie a row or two of vertices apart, and 
 starts may all flip into the same one. The converged best path is then tried again
 from corridors that pass its nearest cone vertices on their other side, one vertex
 each (`_detours`), and corridors moved across a whole stretch of one of its walls
-(`_wall_flip`), in `detour_rounds` rounds, all of a round's detours refined at once
-by the pool of lanes that refined the starts. Each round detours from the best path
+(`_wall_flip`), in `detour_rounds` rounds. Each round detours from the best path
 found, or, if that path's detours were tried already, from the best other one (the
 runner-up): two locally shortest paths may differ at two cone vertices, each of
 whose single detours alone gives a longer path.
@@ -663,15 +662,13 @@ def _refine(
     min_lanes: int | None = None,
     systole=None,
     won_before: Bool[Array, " K"] | bool = False,
-    workers: int | None = None,
 ):
     """Flip until no wrapped vertex admits a shorter way round, for a batch of
     starts (leading axis T of every argument but `mesh`, `theta`). `key` (T,):
     starts of one key (< `n_keys`) reach the same path, and the others stop
     when one has converged (−1: none), here or before (`won_before`); with
     `systole` (per pair, `_won`), all starts of a pair stop once it is
-    certified. `min_lanes`: `POOL_MIN` (None: as the module sets it);
-    `workers`: the pool's width (None: T/`POOL_FRACTION`, at least `min_lanes`).
+    certified. `min_lanes`: `POOL_MIN` (None: as the module sets it).
 
     Starts converge in very different numbers of rounds (on random pairs of the
     20k catenoid 25 on average, up to 62): a loop over all T lanes at once would
@@ -704,9 +701,7 @@ def _refine(
         )
         return result(lane)
 
-    if workers is None:
-        workers = -(-tasks // POOL_FRACTION)
-    workers = max(min_lanes, workers)
+    workers = max(min_lanes, -(-tasks // POOL_FRACTION))
     # the queue: the starts to refine, the first of every key first (its others
     # will mostly be settled by the time they are handed out), then the rest,
     # which are already done
@@ -959,31 +954,8 @@ def exact_solve(
     slots, slot_ok = jax.vmap(lambda a, b: best_slots(smesh, a, b, max_starts))(vs, vt)
     n_pairs, k = slots.shape
 
-    # Phase 0 refines the k starts of every pair; then each of `detour_rounds`
-    # phases all the detours of the best path so far: its `detours` cone
-    # detours and, with `walls`, 8 wall detours. Every phase runs w lanes per
-    # pair (the starts, the unused ones done) through one `_refine`, inside a
-    # while_loop: it is the bulk of the program, and compiled once instead of
-    # once per phase (a third of the compile time). A round's detours run in
-    # one phase, not k at a time as before: one phase per round is simpler, if
-    # not faster (the lane-rounds are the same; 30 random pairs, median:
-    # `bone.ply` 30.2 → 29.9 ms, `airplane.obj` 59.6 → 57.1 ms, lengths equal).
-    # With `min_lanes` 1 (meshes with no cone vertex, `POOL_MIN_CONE_FREE`) a
-    # phase before it refines the first start of every pair alone, and phase 0
-    # the others of the pairs it did not settle (certified, `settled`): most
-    # single paths then build one start rather than k (20k catenoid: 0.6 ms
-    # against 1.9, and the refinement of the other starts' corridors).
-    first_alone = min_lanes == 1
-    p0 = 1 if first_alone else 0
-    n_walls = 2 * len(WALL_STRETCHES) if walls else 0
-    n_detours = detours + n_walls
-    phases = p0 + 1 + (detour_rounds if n_detours else 0)
-    w = max(k, n_detours)
-    # (one worker per `POOL_FRACTION` starts, also for the detours)
-    workers = -(-n_pairs * k // POOL_FRACTION)
-
-    def lanes_of(x):  # (B, ...) → (B·w, ...)
-        return jnp.repeat(x, w, axis=0)
+    def lanes_of(x):  # (B, ...) → (B·k, ...)
+        return jnp.repeat(x, k, axis=0)
 
     # cone-free components: the detours cannot find a shorter path, and two
     # starts of one class reach the same one (`jaxgeo._curvature`)
@@ -1000,7 +972,7 @@ def exact_solve(
 
     s_l, t_l = jax.tree.map(lanes_of, ss), jax.tree.map(lanes_of, ts)
     n_keys = n_pairs * (2 * WINDINGS + 1)
-    lanes = n_pairs * w
+    lanes = n_pairs * k
     unused = (
         jnp.full((lanes, cap), -1, jnp.int32),
         jnp.zeros(lanes, jnp.int32),
@@ -1027,7 +999,7 @@ def exact_solve(
                 one * (2 * WINDINGS + 1) + winding + WINDINGS,
                 -1,
             )
-            rows = one * w + j
+            rows = one * k + j
             return (
                 corridor.at[rows].set(c),
                 n.at[rows].set(m),
@@ -1036,93 +1008,107 @@ def exact_solve(
 
         return jax.lax.fori_loop(lo, hi, one_slot, (unused, no_keys))
 
-    def walls_of(c, m_, a, b):
+    # Phase 0 refines the k starts of every pair; then each of `detour_rounds`
+    # rounds takes the detours of the best path so far, k at a time. All phases
+    # run through one `_refine` inside a fori_loop: it is the bulk of the program,
+    # and compiled once instead of once per phase (a third of the compile time).
+    # With `min_lanes` 1 (meshes with no cone vertex, `POOL_MIN_CONE_FREE`) a
+    # phase before it refines the first start of every pair alone, and phase 0
+    # the others of the pairs it did not settle (certified, `settled`): most
+    # single paths then build one start rather than k (20k catenoid: 0.6 ms
+    # against 1.9, and the refinement of the other starts' corridors).
+    first_alone = min_lanes == 1
+    p0 = 1 if first_alone else 0
+    n_walls = 2 * len(WALL_STRETCHES)
+    cone_chunks = -(-detours // k) if detours else 0
+    chunks = cone_chunks + (-(-n_walls // k) if walls else 0)
+    phases = p0 + 1 + chunks * detour_rounds
+
+    def walls_of(c, m_, a, b):  # padded to whole chunks with unused corridors
         corridor, n, fits = _wall_flips(smesh, c, m_, a, b)
-        return corridor, n, fits, jnp.ones(n_walls, bool)
+        pad = -n_walls % k
+        corridor = jnp.concatenate([corridor, jnp.broadcast_to(c, (pad,) + c.shape)])
+        n = jnp.concatenate([n, jnp.full(pad, m_)])
+        fits = jnp.concatenate([fits, jnp.zeros(pad, bool)])
+        return corridor, n, fits, jnp.arange(n_walls + pad) < n_walls
 
     def detours_of(win: _Lane, fresh):
-        """The detours of every pair's `win`, w per pair (padded with unused
-        corridors)."""
         parts = []
-        if detours:
+        if cone_chunks:
             parts.append(
                 jax.vmap(
                     lambda c, m_, p, pm, a, b: _detours(
-                        smesh, theta, c, m_, p, pm, a, b, detours, tol
+                        smesh, theta, c, m_, p, pm, a, b, cone_chunks * k, tol
                     )
                 )(win.corridor, win.n, win.pinned, win.m, ss, ts)
             )
         if walls:
             parts.append(jax.vmap(walls_of)(win.corridor, win.n, ss, ts))
-        pad = w - n_detours
-        if pad:
-            parts.append(
-                (
-                    jnp.broadcast_to(win.corridor[:, None], (n_pairs, pad, cap)),
-                    jnp.broadcast_to(win.n[:, None], (n_pairs, pad)),
-                    jnp.zeros((n_pairs, pad), bool),
-                    jnp.zeros((n_pairs, pad), bool),
-                )
-            )
         corridor, n, fits, valid = (jnp.concatenate(x, axis=1) for x in zip(*parts))
-        # (`valid`: a cone detour is unused where there are fewer candidate
-        # cones than detours)
+        status0 = jnp.where(
+            valid,
+            jnp.where(fits, -1, Status.MAX_STEPS),
+            Status.REFINE_FAILED,  # fewer candidate cones than detours
+        )
+        cone = jnp.arange(chunks * k)
+        used = (cone < detours) | (cone >= cone_chunks * k)  # walls: `valid`
         # no detours of a pair none of whose starts converged: its `win` is the
         # empty placeholder, whose "detours" would be empty corridors
-        used = valid & (win.status == Status.SUCCESS)[:, None]
+        used = used & (win.status == Status.SUCCESS)[:, None]
         # nor of a path whose detours were tried already (no runner-up either):
         # the round would repeat one already run (measured on random pairs of a
         # 20k-face catenoid, no cone vertices, so never a runner-up: 14 ms of a
         # 140 ms path, and 57 of the batch's ~400 trips)
         used = used & fresh[:, None] & ~no_detours[:, None]
-        status0 = jnp.where(
-            used, jnp.where(fits, -1, Status.MAX_STEPS), Status.REFINE_FAILED
-        )
+        status0 = jnp.where(used, status0, Status.REFINE_FAILED)
         return corridor, n, status0.astype(jnp.int32)
 
     def phase(p, carry):
-        win, alt, expanded, found, outgrew, converged, first_status, keys = carry
+        win, alt, expanded, found, outgrew, converged, first_status, keys, pending = (
+            carry
+        )
         won, grew_keys = keys
         starting = p <= p0
-        q = p - p0  # the detour rounds: 1, 2, …
-
-        def the_starts():
-            if first_alone:  # phase 0: the first slot; then the others, if open
-                open_ = ~(found & settled(win.length))
-                more = jnp.where(jnp.any(open_), k, 1)
-                built = starts_of(
-                    jnp.where(p == 0, 0, 1), jnp.where(p == 0, 1, more), open_
-                )
-            else:
-                built = starts_of(0, k, jnp.ones(n_pairs, bool))
-            return built, win.length
-
-        def the_detours():
+        if first_alone:  # phase 0: the first slot; then the others, if open
+            open_ = ~(found & settled(win.length))
+            more = jnp.where(starting & jnp.any(open_), k, 1)
+            built = starts_of(
+                jnp.where(p == 0, 0, 1), jnp.where(p == 0, 1, more), open_
+            )
+        else:
+            built = starts_of(0, jnp.where(p == 0, k, 0), jnp.ones(n_pairs, bool))
+        q = p - p0  # the detour phases: 1, 2, …
+        j = (q - 1) % max(chunks, 1)
+        if chunks:
             # detour from the best path, or where its detours were tried already
             # (no detour of them was shorter), from the runner-up: two locally
             # shortest paths may differ at two cone vertices, neither of whose
             # single detours is shorter than the best
+            rnd = (q - 1) // chunks
             both = jax.tree.map(lambda x, y: jnp.stack([x, y], axis=1), win, alt)
             fresh = jnp.stack(
                 [~_seen(win.length, expanded), jnp.ones(n_pairs, bool)], 1
             )
             src, src_fresh = _shortest(both, fresh)  # (win if neither qualifies)
-            pending = jax.tree.map(
-                lambda x: x.reshape((n_pairs * w,) + x.shape[2:]),
-                detours_of(src, src_fresh),
+            start_round = (q >= 1) & (j == 0)
+            pending = jax.lax.cond(
+                start_round, lambda: detours_of(src, src_fresh), lambda: pending
             )
-            return (pending, no_keys), src.length
-
-        if n_detours:
-            built, src_length = jax.lax.cond(starting, the_starts, the_detours)
             expanded = jnp.where(
-                ~starting & (jnp.arange(expanded.shape[1]) == q - 1)[None],
-                src_length[:, None],
+                start_round & (jnp.arange(expanded.shape[1]) == rnd)[None],
+                src.length[:, None],
                 expanded,
             )
-        else:
-            built, _ = the_starts()
-        (corridor, n, status0), lane_key = built
+        part = jax.tree.map(
+            lambda x: jax.lax.dynamic_slice_in_dim(x, j * k, k, axis=1).reshape(
+                (n_pairs * k,) + x.shape[2:]
+            ),
+            pending,
+        )
+        corridor, n, status0 = jax.tree.map(
+            lambda a, b: jnp.where(starting, a, b), built[0], part
+        )
+        lane_key = jnp.where(starting, built[1], -1)
         lanes = _refine(
             smesh,
             theta,
@@ -1138,7 +1124,6 @@ def exact_solve(
             min_lanes,
             systole,
             won,
-            workers,
         )
         # a lane that outgrew the capacity matters unless a lane of its key
         # converged, in this phase or a later one: that is the path it would
@@ -1148,8 +1133,8 @@ def exact_solve(
         grew = lanes.status == Status.MAX_STEPS
         keyed = jnp.where(grew & (lane_key >= 0), lane_key, n_keys)
         grew_keys = grew_keys.at[keyed].set(True, mode="drop")
-        grew = (grew & (lane_key < 0)).reshape(n_pairs, w)
-        lanes = jax.tree.map(lambda x: x.reshape((n_pairs, w) + x.shape[1:]), lanes)
+        grew = (grew & (lane_key < 0)).reshape(n_pairs, k)
+        lanes = jax.tree.map(lambda x: x.reshape((n_pairs, k) + x.shape[1:]), lanes)
         ok = jnp.any(lanes.status == Status.SUCCESS, axis=1)
         every = jax.tree.map(
             lambda x, y, z: jnp.concatenate([x[:, None], y[:, None], z], axis=1),
@@ -1177,6 +1162,7 @@ def exact_solve(
             converged + jnp.where(starting, jnp.sum(good, axis=1, dtype=jnp.int32), 0),
             jnp.where(p == 0, lanes.status[:, 0], first_status),
             (won, grew_keys),
+            pending,
         )
 
     no_win = _Lane(
@@ -1191,6 +1177,12 @@ def exact_solve(
         done=jnp.ones(n_pairs, bool),
     )
     no = jnp.zeros(n_pairs, bool)
+    width = max(chunks, 1) * k  # (with no detours, one unused chunk)
+    pending = (
+        jnp.full((n_pairs, width, cap), -1, jnp.int32),
+        jnp.zeros((n_pairs, width), jnp.int32),
+        jnp.full((n_pairs, width), Status.REFINE_FAILED, jnp.int32),
+    )
     expanded = jnp.full((n_pairs, max(detour_rounds, 1)), jnp.inf, dtype)
     init = (
         no_win,
@@ -1211,8 +1203,10 @@ def exact_solve(
         win, found = carry[0], carry[3]
         return (p < n_phases) & ~jnp.all(found & settled(win.length))
 
-    _, carry = jax.lax.while_loop(more, lambda st: (st[0] + 1, phase(*st)), (0, init))
-    win, _, _, found, outgrew, converged, first_status, keys = carry
+    _, carry = jax.lax.while_loop(
+        more, lambda st: (st[0] + 1, phase(*st)), (0, init + (pending,))
+    )
+    win, _, _, found, outgrew, converged, first_status, keys, _ = carry
     won, grew_keys = keys
     outgrew = outgrew | jnp.any((grew_keys & ~won).reshape(n_pairs, -1), axis=1)
     status = jnp.where(found, Status.SUCCESS, first_status)
