@@ -31,6 +31,7 @@ def _padded(cloths, order):
     return x3, uv, faces, fmask
 
 
+@pytest.mark.slow  # 18 s niced beside CI: among the fast set's longest (12-08)
 def test_carried_flattening_is_the_old_one_and_the_template_continues_it():
     mesh = jg.Mesh(*surfaces.cone_tent(24, 6))
     layout = seams.radial_layout(mesh, 6, offset=0.1)

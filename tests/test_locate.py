@@ -92,6 +92,7 @@ def test_surface_points_on_edges_and_vertices():
     ).all()
 
 
+@pytest.mark.slow  # 16 s niced beside CI: among the fast set's longest (12-08)
 def test_path_from_a_vertex_to_an_edge_point():
     v, f = np.asarray(MESH.vertices), np.asarray(MESH.faces)
     a = v[f[0, 0]]

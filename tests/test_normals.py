@@ -380,6 +380,7 @@ def test_gradient_is_finite_and_correct(weighting):
     np.testing.assert_allclose(np.sum(g * d), fd[i], rtol=1e-6)
 
 
+@pytest.mark.slow  # 12 s niced beside CI: among the fast set's longest (12-08)
 def test_gradient_under_jit():
     v, f = icosphere(1)
     g = jax.jit(jax.grad(lambda x: vertex_normals(x, f)[0, 2]))(jnp.asarray(v))

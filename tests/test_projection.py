@@ -119,6 +119,7 @@ def test_edge_along_the_chord_is_degenerate_not_valid():
     assert bool(cr.degenerate[0]) and not bool(cr.valid.any())
 
 
+@pytest.mark.slow  # 13 s niced beside CI: among the fast set's longest (12-08)
 def test_solve_crossing_gradient_is_finite_and_matches_fd():
     mesh, a, b = _random_mesh_and_chords(4)
     x1, x2, n1, n2 = _edge_arrays(mesh)

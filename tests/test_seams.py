@@ -84,6 +84,7 @@ def test_old_module_imports_first_in_a_fresh_interpreter():
     assert run.returncode == 0, run.stderr[-2000:]
 
 
+@pytest.mark.slow  # 13 s niced beside CI: among the fast set's longest (12-08)
 def test_bridged_layout_leaves_every_seam_from_a_ring():
     mesh = jg.Mesh(*surfaces.twin_peak_tent(n_side=4, n_radial=4))
     n, b, sector, shift = 5, 3, 130.0, 1.0
